@@ -1,0 +1,3 @@
+"""substation-twin: a reproducible build system for digital twins of substations."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,294 @@
+"""site.toml, asset.toml and scenario loading, validated against schemas/.
+
+Every failure is a `UserError` naming the file and the key (e.g. `plan.crs`).
+Defaults live in the JSON Schemas and are filled in here, so the schema is the one
+place that documents them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+
+from .errors import UserError
+
+SCHEMA_DIR = Path(__file__).resolve().parent.parent / "schemas"
+
+
+@lru_cache(maxsize=None)
+def schema(name: str) -> dict:
+    return json.loads((SCHEMA_DIR / f"{name}.schema.json").read_text())
+
+
+def read_toml(path: Path) -> dict:
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise UserError(path, None, "file not found") from None
+    except OSError as e:
+        raise UserError(path, None, f"cannot read: {e.strerror}") from None
+    try:
+        return tomllib.loads(raw.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise UserError(path, None, "not UTF-8 text") from None
+    except tomllib.TOMLDecodeError as e:
+        raise UserError(path, None, f"TOML syntax error: {e}") from None
+
+
+def _key_path(error: jsonschema.ValidationError) -> str:
+    parts = []
+    for p in error.absolute_path:
+        parts.append(f"[{p}]" if isinstance(p, int) else (("." if parts else "") + str(p)))
+    return "".join(parts) or "(top level)"
+
+
+def validate(data: dict, schema_name: str, path: Path) -> None:
+    """Raise one UserError for the first schema violation, naming the key."""
+    validator = jsonschema.Draft202012Validator(schema(schema_name))
+    errors = sorted(validator.iter_errors(data), key=lambda e: (list(map(str, e.absolute_path)), e.message))
+    if not errors:
+        return
+    e = errors[0]
+    if e.validator == "required":
+        missing = e.message.split("'")[1] if "'" in e.message else e.message
+        where = _key_path(e)
+        key = missing if where == "(top level)" else f"{where}.{missing}"
+        raise UserError(path, key, "missing required key")
+    if e.validator == "additionalProperties":
+        raise UserError(path, _key_path(e), f"unknown key: {e.message}")
+    raise UserError(path, _key_path(e), e.message)
+
+
+def _defaults(node_schema: dict, data: Any) -> Any:
+    """Fill schema defaults into `data` (objects only; arrays of objects recursively)."""
+    if node_schema.get("type") == "object" and isinstance(data, dict):
+        for key, sub in node_schema.get("properties", {}).items():
+            if key not in data and "default" in sub:
+                data[key] = sub["default"]
+            if key in data:
+                data[key] = _defaults(sub, data[key])
+    elif node_schema.get("type") == "array" and isinstance(data, list) and "items" in node_schema:
+        data = [_defaults(node_schema["items"], d) for d in data]
+    return data
+
+
+# --- site.toml -----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Level:
+    name: str
+    elevation: float
+
+
+@dataclass(frozen=True)
+class InspectionPoint:
+    name: str
+    position: tuple[float, float, float]
+    level: str
+    target: str | None = None
+
+
+@dataclass(frozen=True)
+class Site:
+    """site.toml, validated, with defaults filled in. `path` is the file itself."""
+
+    path: Path
+    name: str
+    crs: str
+    grid_origin: tuple[float, float]
+    grid_rotation_deg: float
+    grid_scale: float
+    origin: tuple[float, float, float] | None  # lat, lon, height; None: platform centre
+    levels: tuple[Level, ...]
+    slope_ratio: float
+    natural_ground: float
+    skirt_width: float
+    screen_tolerance_px: float
+    reference_hfov_rad: float
+    reference_width_px: int
+    inspection_points: tuple[InspectionPoint, ...]
+    floorplan: str = "floorplan/substation.dxf"
+    date: str = "2025-03-20"
+    description: str = ""
+    raw: dict = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def root(self) -> Path:
+        return self.path.parent
+
+    def level(self, name: str) -> Level:
+        for lv in self.levels:
+            if lv.name == name:
+                return lv
+        raise KeyError(name)
+
+    @property
+    def level_names(self) -> tuple[str, ...]:
+        return tuple(lv.name for lv in self.levels)
+
+
+def check_crs(code: str, path: Path, key: str) -> None:
+    from pyproj import CRS
+    from pyproj.exceptions import CRSError
+
+    try:
+        crs = CRS.from_user_input(code)
+    except CRSError:
+        raise UserError(path, key, f"unknown CRS {code!r} (no such EPSG code)") from None
+    if not crs.is_projected:
+        raise UserError(path, key, f"{code} ({crs.name}) is not a projected CRS")
+
+
+def load_site(path: Path) -> Site:
+    path = Path(path)
+    data = read_toml(path)
+    validate(data, "site", path)
+    data = _defaults(schema("site"), data)
+    check_crs(data["plan"]["crs"], path, "plan.crs")
+
+    names = [lv["name"] for lv in data["levels"]]
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            raise UserError(path, f"levels[{i}].name", f"duplicate level {n!r}")
+    for i, p in enumerate(data.get("inspection_points", [])):
+        if p["level"] not in names:
+            raise UserError(path, f"inspection_points[{i}].level", f"level {p['level']!r} is not defined in [[levels]]")
+    for key, value in _numbers(data):
+        if not math.isfinite(value):
+            raise UserError(path, key, "not a finite number")
+
+    levels = tuple(Level(lv["name"], float(lv["elevation"])) for lv in data["levels"])
+    terrain = data.get("terrain", _defaults(schema("site")["properties"]["terrain"], {}))
+    lod = data.get("lod", _defaults(schema("site")["properties"]["lod"], {}))
+    origin = data.get("origin")
+    return Site(
+        path=path,
+        name=data["site"]["name"],
+        description=data["site"].get("description", ""),
+        floorplan=data["site"]["floorplan"],
+        date=data["site"]["date"],
+        crs=data["plan"]["crs"],
+        grid_origin=tuple(float(v) for v in data["plan"]["grid_origin"]),
+        grid_rotation_deg=float(data["plan"]["grid_rotation_deg"]),
+        grid_scale=float(data["plan"]["grid_scale"]),
+        origin=None if origin is None else (float(origin["lat"]), float(origin["lon"]), float(origin["height"])),
+        levels=levels,
+        slope_ratio=float(terrain["slope_ratio"]),
+        natural_ground=float(terrain.get("natural_ground", min(lv.elevation for lv in levels) - 2.0)),
+        skirt_width=float(terrain["skirt_width"]),
+        screen_tolerance_px=float(lod["screen_tolerance_px"]),
+        reference_hfov_rad=float(lod["reference_hfov_rad"]),
+        reference_width_px=int(lod["reference_width_px"]),
+        inspection_points=tuple(
+            InspectionPoint(p["name"], tuple(float(v) for v in p["position"]), p["level"], p.get("target"))
+            for p in data.get("inspection_points", [])
+        ),
+        raw=data,
+    )
+
+
+def _numbers(data: Any, prefix: str = ""):
+    if isinstance(data, dict):
+        for k, v in data.items():
+            yield from _numbers(v, f"{prefix}.{k}" if prefix else k)
+    elif isinstance(data, list):
+        for i, v in enumerate(data):
+            yield from _numbers(v, f"{prefix}[{i}]")
+    elif isinstance(data, float):
+        yield prefix, data
+
+
+# --- asset.toml ----------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AssetConfig:
+    """asset.toml of sources/assets/<id>/, validated, with defaults filled in."""
+
+    path: Path
+    id: str
+    category: str
+    description: str
+    source: Path
+    units: str
+    up_axis: str
+    tessellation_tolerance_m: float
+    triangle_budget: int
+    mass_kg: float
+    lod_budgets_m: tuple[float, ...]
+    collision_mode: str
+    bindings: tuple[dict, ...]
+    raw: dict = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def folder(self) -> Path:
+        return self.path.parent
+
+    @property
+    def params(self) -> dict:
+        """Everything in asset.toml that affects the build, as plain JSON data."""
+        return self.raw
+
+
+SAFE_ID = r"^[a-z0-9][a-z0-9_]*$"
+
+
+def load_asset_config(path: Path) -> AssetConfig:
+    import re
+
+    path = Path(path)
+    asset_id = path.parent.name
+    if not re.match(SAFE_ID, asset_id):
+        raise UserError(path.parent, asset_id, "asset id must be lower-case letters, digits and _")
+    data = read_toml(path)
+    validate(data, "asset", path)
+    data = _defaults(schema("asset"), data)
+    for key, value in _numbers(data):
+        if not math.isfinite(value):
+            raise UserError(path, key, "not a finite number")
+    budgets = tuple(float(b) for b in data.get("lod", {}).get("budgets_m", [0.005, 0.02, 0.08]))
+    if list(budgets) != sorted(budgets):
+        raise UserError(path, "lod.budgets_m", "budgets must ascend (LOD1 finest)")
+    source = path.parent / data["source"]
+    if not source.is_file():
+        raise UserError(path, "source", f"source file {data['source']!r} not found in {path.parent}")
+    return AssetConfig(
+        path=path,
+        id=asset_id,
+        category=data["category"],
+        description=data.get("description", ""),
+        source=source,
+        units=data["units"],
+        up_axis=data["up_axis"],
+        tessellation_tolerance_m=float(data["tessellation_tolerance_m"]),
+        triangle_budget=int(data["triangle_budget"]),
+        mass_kg=float(data["mass_kg"]),
+        lod_budgets_m=budgets,
+        collision_mode=data.get("collision", {}).get("mode", "hull_per_link"),
+        bindings=tuple(data.get("bindings", [])),
+        raw=data,
+    )
+
+
+def load_assets(sources: Path) -> tuple[dict[str, AssetConfig], list[UserError]]:
+    """Every sources/assets/<id>/asset.toml; broken ones are returned as errors."""
+    configs: dict[str, AssetConfig] = {}
+    problems: list[UserError] = []
+    folder = Path(sources) / "assets"
+    for toml in sorted(folder.glob("*/asset.toml")):
+        try:
+            cfg = load_asset_config(toml)
+        except UserError as e:
+            problems.append(e)
+            continue
+        configs[cfg.id] = cfg
+    return configs, problems

@@ -1,0 +1,56 @@
+"""Names shared by every writer, the scene assembly and the runtime, so a visual can be
+found in each format without parsing it: one rule, written once."""
+
+from __future__ import annotations
+
+import re
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9_]")
+
+
+def safe_name(name: str) -> str:
+    """An identifier valid in USD, SDF and file names: [A-Za-z_][A-Za-z0-9_]*."""
+    s = _UNSAFE.sub("_", name)
+    if not s or s[0].isdigit():
+        s = "_" + s
+    return s
+
+
+def mesh_file(link: str, visual: str, lod: int) -> str:
+    """Package-relative COLLADA file of one visual at one LOD."""
+    return f"meshes/{safe_name(link)}__{safe_name(visual)}__lod{lod}.dae"
+
+
+def collision_file(link: str, collision: str) -> str:
+    return f"meshes/{safe_name(link)}__{safe_name(collision)}__collision.dae"
+
+
+def usd_file(asset_id: str) -> str:
+    return f"{asset_id}.usdc"
+
+
+def gltf_file(asset_id: str) -> str:
+    return f"{asset_id}.glb"
+
+
+def usd_visual_path(asset_id: str, link: str, visual: str) -> str:
+    """Prim path of a visual's Xform in the asset's USD (the mesh is its child `mesh`)."""
+    return f"/{safe_name(asset_id)}/{safe_name(link)}/{safe_name(visual)}"
+
+
+def usd_link_path(asset_id: str, link: str) -> str:
+    return f"/{safe_name(asset_id)}/{safe_name(link)}"
+
+
+def lod_model_name(asset_id: str, lod: int) -> str:
+    """SDF model folder of an asset's LOD variant; LOD 0 is the package itself."""
+    return asset_id if lod == 0 else f"{asset_id}__lod{lod}"
+
+
+def fmt(x: float) -> str:
+    """Shortest round-trip text of a float, the same on every platform; no -0."""
+    x = float(x)
+    if x == 0.0:
+        return "0"
+    r = repr(x)
+    return r[:-2] if r.endswith(".0") else r
