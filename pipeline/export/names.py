@@ -54,3 +54,12 @@ def fmt(x: float) -> str:
         return "0"
     r = repr(x)
     return r[:-2] if r.endswith(".0") else r
+
+
+SCENE_ROOT = "/Site"
+
+
+def scene_placement_path(tag: str) -> str:
+    """Prim path of a placement in the scene stage build/scene/<site>.usda; the asset's
+    prims (links, visuals) are below it, e.g. <this>/<link>/<visual>."""
+    return f"{SCENE_ROOT}/Placements/{safe_name(tag)}"

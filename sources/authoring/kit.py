@@ -2,6 +2,9 @@
 library, joint Empties and state bindings in the conventions of DESIGN.md s.2, and a
 save that writes the same file every time.
 
+The sample asset set (ids, sizes, triangle ranges, conventions) is specified in
+sources/authoring/ASSETS.md: every authoring script follows it.
+
 Run an authoring script with the project's Python (bpy installed as a module):
     .venv/bin/python sources/authoring/<script>.py [--out sources/assets]
 """

@@ -1,0 +1,74 @@
+"""A content-addressed store of task outputs, keyed by task key.
+
+Layout: <root>/<key[:2]>/<key>/files/<output paths...> and meta.json (written last).
+An entry appears by one directory rename, so a build killed at any moment leaves
+either a whole entry or none: never a poisoned one. Restoring copies each file to a
+temporary name beside its destination and renames it into place.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import uuid
+from pathlib import Path
+
+from .graph import sha256_file
+
+
+class Cache:
+    def __init__(self, root: Path):
+        self.root = Path(root)
+
+    def entry(self, key: str) -> Path:
+        return self.root / key[:2] / key
+
+    def has(self, key: str) -> bool:
+        return (self.entry(key) / "meta.json").is_file()
+
+    def meta(self, key: str) -> dict:
+        return json.loads((self.entry(key) / "meta.json").read_text())
+
+    def put(self, key: str, staging: Path, result: dict) -> dict:
+        """Move a finished task's staging folder into the store; returns its meta."""
+        files = sorted(p for p in Path(staging).rglob("*") if p.is_file())
+        meta = {
+            "key": key,
+            "files": {str(p.relative_to(staging)): sha256_file(p) for p in files},
+            "result": result,
+        }
+        if self.has(key):
+            shutil.rmtree(staging, ignore_errors=True)
+            return self.meta(key)
+        tmp = self.root / f".tmp-{uuid.uuid4().hex}"
+        (tmp).mkdir(parents=True)
+        os.replace(staging, tmp / "files")
+        (tmp / "meta.json").write_text(json.dumps(meta, sort_keys=True, indent=1))
+        final = self.entry(key)
+        final.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.replace(tmp, final)
+        except OSError:  # another build stored the same key first: same content
+            shutil.rmtree(tmp, ignore_errors=True)
+        return meta
+
+    def restore(self, key: str, build: Path) -> dict:
+        """Place the entry's files into `build`, each by temp-and-rename; returns meta."""
+        meta = self.meta(key)
+        src_root = self.entry(key) / "files"
+        for rel, digest in sorted(meta["files"].items()):
+            dest = Path(build) / rel
+            if dest.is_file() and dest.stat().st_size == (src_root / rel).stat().st_size and sha256_file(dest) == digest:
+                continue
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            tmp = dest.with_name(f".{dest.name}.tmp-{uuid.uuid4().hex[:8]}")
+            shutil.copyfile(src_root / rel, tmp)
+            os.replace(tmp, dest)
+        return meta
+
+    def clean_tmp(self) -> None:
+        """Remove leftovers of killed builds (never complete entries)."""
+        if self.root.is_dir():
+            for p in self.root.glob(".tmp-*"):
+                shutil.rmtree(p, ignore_errors=True)

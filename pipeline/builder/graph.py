@@ -1,0 +1,190 @@
+"""Tasks and their keys: inputs (file content hashes) + parameters (sorted JSON) +
+code version -> outputs. A task whose key is unchanged does not run (DESIGN.md s.5).
+
+Content decides. mtime and size only skip re-hashing a file whose (size, mtime_ns)
+matches what the last build hashed; a fresh CI checkout just hashes everything once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+HASH_CHUNK = 1 << 20
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(HASH_CHUNK):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def canonical_json(data: Any) -> str:
+    """The one text of a parameter set: sorted keys, no whitespace, repr floats."""
+    return json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+
+
+def sha256_text(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+class FileHasher:
+    """Content hashes with a (size, mtime_ns) pre-check carried between builds."""
+
+    def __init__(self, memo: dict[str, list] | None = None):
+        self.memo: dict[str, list] = dict(memo or {})
+
+    def __call__(self, path: Path) -> str:
+        path = Path(path)
+        st = path.stat()
+        key = str(path.resolve())
+        seen = self.memo.get(key)
+        if seen and seen[0] == st.st_size and seen[1] == st.st_mtime_ns:
+            return seen[2]
+        digest = sha256_file(path)
+        self.memo[key] = [st.st_size, st.st_mtime_ns, digest]
+        return digest
+
+
+def code_version(*modules: str) -> str:
+    """Hash of the source text of the named modules or packages (pipeline.*), so a
+    change to a step's code reruns exactly the tasks that run that step."""
+    import importlib.util
+
+    h = hashlib.sha256()
+    for name in sorted(set(modules)):
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.origin is None:
+            raise ValueError(f"no module {name}")
+        origin = Path(spec.origin)
+        files = sorted(origin.parent.rglob("*.py")) if origin.name == "__init__.py" else [origin]
+        for f in files:
+            h.update(str(f.relative_to(origin.parent.parent) if origin.name == "__init__.py" else f.name).encode())
+            h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+@dataclass
+class Task:
+    """One unit of work.
+
+    inputs:  source files read (absolute paths); their content hashes enter the key.
+    deps:    names of tasks whose outputs this task reads (their keys enter this key).
+    params:  JSON-serialisable parameters; enter the key as sorted JSON.
+    code:    code version of the steps the action runs.
+    outputs: paths relative to the build folder, each produced by this task alone.
+    action:  a picklable callable `action(**args)` run in a worker; it writes the
+             outputs into the staging folder it is given and returns a JSON-able dict.
+    """
+
+    name: str
+    stage: str
+    action: Callable[..., dict]
+    args: dict
+    inputs: tuple[Path, ...] = ()
+    deps: tuple[str, ...] = ()
+    params: Any = None
+    code: str = ""
+    outputs: tuple[str, ...] = ()
+    needs_blender: bool = False
+    key: str = ""
+    input_hashes: dict[str, str] = field(default_factory=dict)
+
+    def compute_key(self, hasher: FileHasher, dep_keys: dict[str, str], root: Path) -> str:
+        self.input_hashes = {_rel(p, root): hasher(p) for p in self.inputs}
+        material = {
+            "name": self.name,
+            "inputs": self.input_hashes,
+            "deps": {d: dep_keys[d] for d in sorted(self.deps)},
+            "params": self.params,
+            "code": self.code,
+        }
+        self.key = sha256_text(canonical_json(material))
+        return self.key
+
+
+def _rel(path: Path, root: Path) -> str:
+    try:
+        return os.path.relpath(Path(path).resolve(), root.resolve())
+    except ValueError:
+        return str(path)
+
+
+class GraphError(Exception):
+    pass
+
+
+def check_graph(tasks: list[Task]) -> list[Task]:
+    """Tasks in dependency order; each output has exactly one producer, no cycles."""
+    by_name: dict[str, Task] = {}
+    producers: dict[str, str] = {}
+    for t in tasks:
+        if t.name in by_name:
+            raise GraphError(f"two tasks named {t.name}")
+        by_name[t.name] = t
+        for out in t.outputs:
+            if out in producers:
+                raise GraphError(f"output {out} has two producers: {producers[out]} and {t.name}")
+            producers[out] = t.name
+    order: list[Task] = []
+    state: dict[str, int] = {}
+
+    def visit(name: str, chain: tuple[str, ...]):
+        if state.get(name) == 2:
+            return
+        if state.get(name) == 1:
+            raise GraphError("dependency cycle: " + " -> ".join((*chain, name)))
+        if name not in by_name:
+            raise GraphError(f"{chain[-1] if chain else '?'} depends on unknown task {name}")
+        state[name] = 1
+        for d in sorted(by_name[name].deps):
+            visit(d, (*chain, name))
+        state[name] = 2
+        order.append(by_name[name])
+
+    for t in sorted(tasks, key=lambda t: t.name):
+        visit(t.name, ())
+    return order
+
+
+def explain(task: Task, previous: dict | None, cached: bool, dep_keys: dict[str, str]) -> dict:
+    """Why a task runs or is skipped, from the key material of the last build."""
+    if previous is None:
+        reason = "restored from cache" if cached else "new"
+        return {"task": task.name, "ran": not cached, "reason": reason, "changed": []}
+    if previous.get("key") == task.key:
+        return {"task": task.name, "ran": False, "reason": "up to date", "changed": []}
+    changed = []
+    old_inputs = previous.get("inputs", {})
+    for path in sorted(set(old_inputs) | set(task.input_hashes)):
+        if old_inputs.get(path) != task.input_hashes.get(path):
+            changed.append(f"input {path}")
+    for dep in sorted(set(previous.get("deps", {})) | set(task.deps)):
+        if previous.get("deps", {}).get(dep) != dep_keys.get(dep):
+            changed.append(f"dependency {dep}")
+    if canonical_json(previous.get("params")) != canonical_json(task.params):
+        changed.append("parameters")
+    if previous.get("code") != task.code:
+        changed.append("code")
+    if cached:
+        return {"task": task.name, "ran": False, "reason": "restored from cache", "changed": changed}
+    reason = "changed: " + ", ".join(changed) if changed else "key changed"
+    return {"task": task.name, "ran": True, "reason": reason, "changed": changed}
+
+
+def record(task: Task, dep_keys: dict[str, str]) -> dict:
+    """What the state file keeps of a task to explain the next build."""
+    return {
+        "key": task.key,
+        "inputs": task.input_hashes,
+        "deps": {d: dep_keys[d] for d in sorted(task.deps)},
+        "params": task.params,
+        "code": task.code,
+        "outputs": list(task.outputs),
+    }

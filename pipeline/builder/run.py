@@ -1,0 +1,29 @@
+"""`twin build`: plan the task graph from the sources, run it with progress."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from .scheduler import BuildReport, Scheduler
+from .tasks import plan
+
+
+def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] | None = None,
+          cache: Path | None = None, quiet: bool = False) -> BuildReport:
+    p = plan(Path(sources), only=only or None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    console = Console(file=sys.stderr, quiet=quiet)
+    stages = sorted({t.stage for t in p.tasks}, key=["assets", "terrain", "scene"].index)
+    with Progress(TextColumn("{task.description:<8}"), BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as progress:
+        bars = {s: progress.add_task(s, total=sum(t.stage == s for t in p.tasks)) for s in stages}
+        scheduler = Scheduler(out, cache=cache, jobs=jobs, progress=lambda t: progress.advance(bars[t.stage]))
+        report = scheduler.run(p.tasks)
+    if p.unused and not only:
+        console.print(f"not built (no placement or scenario uses them): {', '.join(p.unused)}")
+    return report

@@ -1,0 +1,224 @@
+"""Runs a task graph over a pool of worker processes, incrementally and safely.
+
+- A task whose key matches the last build and whose outputs are in place is skipped;
+  one whose key is in the cache is restored; the rest run in workers.
+- Workers are spawned once and serve many tasks; a worker that will read .blend
+  files imports bpy once at start (`warm_blender`).
+- The build folder is locked (fcntl) for the whole build: a second build waits.
+- Every output reaches build/ through the cache by temp-and-rename, and the state
+  file is rewritten atomically after each task, so a killed build resumes cleanly.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import multiprocessing
+import os
+import shutil
+import sys
+import time
+import traceback
+import uuid
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import UserError
+from .cache import Cache
+from .graph import FileHasher, Task, check_graph, explain, record
+
+STATE_FILE = ".state.json"
+LOCK_FILE = ".lock"
+
+
+@dataclass
+class BuildReport:
+    explanations: list[dict] = field(default_factory=list)
+    results: dict[str, dict] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+    failed: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def ran(self) -> list[str]:
+        return [e["task"] for e in self.explanations if e["ran"]]
+
+
+class BuildLock:
+    """An exclusive lock on the build folder; a second build waits and says so."""
+
+    def __init__(self, build: Path, wait: bool = True, notify=print):
+        self.path = Path(build) / LOCK_FILE
+        self.wait = wait
+        self.notify = notify
+        self.fd = None
+
+    def __enter__(self):
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if not self.wait:
+                os.close(self.fd)
+                raise UserError(self.path, None, "another build is using this build folder") from None
+            self.notify(f"waiting for another build that holds {self.path}")
+            fcntl.flock(self.fd, fcntl.LOCK_EX)
+        return self
+
+    def __exit__(self, *exc):
+        fcntl.flock(self.fd, fcntl.LOCK_UN)
+        os.close(self.fd)
+
+
+def warm_blender() -> None:
+    """Worker initializer: pay bpy's import once per worker, not once per task."""
+    try:
+        import bpy  # noqa: F401
+    except ImportError:
+        pass
+
+
+def _run_in_worker(action, args: dict, staging: str) -> dict:
+    """Runs in a worker. User errors come back as data so the parent reports them."""
+    try:
+        t0 = time.perf_counter()
+        result = action(staging=Path(staging), **args) or {}
+        return {"ok": True, "result": result, "seconds": time.perf_counter() - t0}
+    except UserError as e:
+        return {"ok": False, "user_error": str(e)}
+    except Exception as e:  # a bug: keep the trace for the report, not the user's screen
+        return {"ok": False, "error": f"{type(e).__name__}: {e}", "trace": traceback.format_exc()}
+
+
+class Scheduler:
+    def __init__(self, build: Path, cache: Path | None = None, jobs: int | None = None, progress=None):
+        self.build = Path(build)
+        self.cache = Cache(cache or self.build / ".cache")
+        self.jobs = max(1, jobs or os.cpu_count() or 1)
+        self.progress = progress
+
+    # --- state ------------------------------------------------------------------
+    def _load_state(self) -> dict:
+        try:
+            return json.loads((self.build / STATE_FILE).read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            return {"tasks": {}, "hashes": {}}
+
+    def _save_state(self, state: dict) -> None:
+        path = self.build / STATE_FILE
+        tmp = path.with_name(f"{STATE_FILE}.tmp-{uuid.uuid4().hex[:8]}")
+        tmp.write_text(json.dumps(state, sort_keys=True, indent=1))
+        os.replace(tmp, path)
+
+    def _outputs_in_place(self, previous: dict | None) -> bool:
+        if not previous:
+            return False
+        return all((self.build / rel).is_file() for rel in previous.get("files", []))
+
+    def _place(self, task: Task, key: str) -> dict:
+        """Restore a cache entry into build/ and drop files the task no longer makes."""
+        meta = self.cache.restore(key, self.build)
+        keep = set(meta["files"])
+        for out in task.outputs:
+            folder = self.build / out
+            if out.endswith("/") and folder.is_dir():
+                for p in sorted(folder.rglob("*")):
+                    rel = str(p.relative_to(self.build))
+                    if p.is_file() and rel not in keep:
+                        p.unlink()
+        return meta
+
+    # --- run --------------------------------------------------------------------
+    def run(self, tasks: list[Task], stop_on_error: bool = True) -> BuildReport:
+        order = check_graph(tasks)
+        report = BuildReport()
+        with BuildLock(self.build, notify=lambda m: print(m, file=sys.stderr)):
+            self.cache.clean_tmp()
+            shutil.rmtree(self.build / ".staging", ignore_errors=True)
+            state = self._load_state()
+            hasher = FileHasher(state.get("hashes"))
+            keys: dict[str, str] = {}
+            pending = {t.name: t for t in order}
+            done: set[str] = set()
+            running: dict[Future, Task] = {}
+            needs_bpy = any(t.needs_blender for t in order)
+            pool = None
+            try:
+                while pending or running:
+                    for name in [n for n, t in pending.items() if all(d in done for d in t.deps)]:
+                        task = pending.pop(name)
+                        if any(d in {f for f, _ in report.failed} for d in task.deps):
+                            report.failed.append((name, "skipped: a dependency failed"))
+                            done.add(name)
+                            continue
+                        task.compute_key(hasher, keys, self.build)
+                        keys[name] = task.key
+                        previous = state["tasks"].get(name)
+                        if previous and previous.get("key") == task.key and self._outputs_in_place(previous):
+                            report.explanations.append(explain(task, previous, False, keys))
+                            report.results[name] = previous.get("result", {})
+                            done.add(name)
+                            self._tick(task)
+                            continue
+                        if self.cache.has(task.key):
+                            meta = self._place(task, task.key)
+                            report.explanations.append(explain(task, previous, True, keys))
+                            self._finish(state, task, keys, meta, report)
+                            done.add(name)
+                            continue
+                        if pool is None:
+                            ctx = multiprocessing.get_context("spawn")
+                            pool = ProcessPoolExecutor(
+                                max_workers=self.jobs, mp_context=ctx,
+                                initializer=warm_blender if needs_bpy else None)
+                        staging = self.build / ".staging" / task.key
+                        shutil.rmtree(staging, ignore_errors=True)
+                        staging.mkdir(parents=True)
+                        report.explanations.append(explain(task, previous, False, keys))
+                        running[pool.submit(_run_in_worker, task.action, task.args, str(staging))] = task
+                    if not running:
+                        if pending:  # everything left waits on a failed task
+                            continue
+                        break
+                    finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
+                    for fut in finished:
+                        task = running.pop(fut)
+                        staging = self.build / ".staging" / task.key
+                        out = fut.result()
+                        if not out["ok"]:
+                            msg = out.get("user_error") or out.get("error")
+                            report.failed.append((task.name, msg))
+                            if "trace" in out:
+                                report.results[task.name] = {"trace": out["trace"]}
+                            shutil.rmtree(staging, ignore_errors=True)
+                            done.add(task.name)
+                            if stop_on_error:
+                                pending.clear()
+                            continue
+                        report.timings[task.name] = out["seconds"]
+                        self.cache.put(task.key, staging, out["result"])
+                        meta = self._place(task, task.key)
+                        self._finish(state, task, keys, meta, report)
+                        done.add(task.name)
+                        state["hashes"] = hasher.memo
+                        self._save_state(state)
+            finally:
+                if pool is not None:
+                    pool.shutdown(wait=True, cancel_futures=True)
+                state["hashes"] = hasher.memo
+                self._save_state(state)
+                shutil.rmtree(self.build / ".staging", ignore_errors=True)
+        return report
+
+    def _finish(self, state: dict, task: Task, keys: dict, meta: dict, report: BuildReport) -> None:
+        entry = record(task, keys)
+        entry["files"] = sorted(meta["files"])
+        entry["result"] = meta.get("result", {})
+        state["tasks"][task.name] = entry
+        report.results[task.name] = entry["result"]
+        self._tick(task)
+
+    def _tick(self, task: Task) -> None:
+        if self.progress is not None:
+            self.progress(task)

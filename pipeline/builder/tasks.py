@@ -1,0 +1,189 @@
+"""The build's tasks: one package per used asset, the terrain, the scene.
+
+`plan()` reads the sources and returns the task graph; the actions below run in
+worker processes and write into the staging folder they are given (paths relative
+to build/). Each asset task is the asset's whole chain: read -> steps -> writers.
+"""
+
+from __future__ import annotations
+
+import time
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .. import config, ir
+from ..errors import UserError
+from ..export import names
+from .graph import Task, code_version, sha256_file
+
+ASSET_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest", "pipeline.geometry",
+              "pipeline.export", "pipeline.builder.tasks")
+SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
+              "pipeline.scene", "pipeline.export", "pipeline.geometry.transform", "pipeline.builder.tasks")
+
+
+# --- the asset chain ----------------------------------------------------------
+
+
+def read_source(cfg: config.AssetConfig) -> ir.Asset:
+    """The reader for the source's kind (DESIGN.md s.2), returning ir.Asset."""
+    suffix = cfg.source.suffix.lower()
+    if suffix == ".blend":
+        from ..ingest.blend import read_blend
+        return read_blend(cfg)
+    if suffix in (".step", ".stp"):
+        from ..ingest.cad import read_cad
+        return read_cad(cfg)
+    from ..ingest.mesh import read_mesh
+    return read_mesh(cfg)
+
+
+def asset_steps(cfg: config.AssetConfig) -> list:
+    """The processing pipeline of one asset: a list of Asset -> Asset steps."""
+    from ..geometry.clean import CleanOptions, clean
+    from ..geometry.collision import CollisionOptions, collision_step
+    from ..geometry.lod import LodOptions, lod_chain
+
+    return [
+        clean(CleanOptions()),
+        collision_step(CollisionOptions(mode=cfg.collision_mode)),
+        lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m)),
+    ]
+
+
+def write_package(asset: ir.Asset, models: Path) -> tuple[dict[str, str], list[str]]:
+    """Every format of one asset into models/<id>/, LOD variants beside it.
+    Returns (package-relative path -> sha256, LOD variant model names)."""
+    from ..export import collada, gltf, sdf, thumbnail, usd
+
+    folder = _inside(models, asset.id)
+    folder.mkdir(parents=True, exist_ok=True)
+    for writer in (collada.write, sdf.write, usd.write, gltf.write, thumbnail.write):
+        writer(asset, folder)
+    lod_models = []
+    for level in range(1, asset.lod_count):
+        name = names.lod_model_name(asset.id, level)
+        variant = _inside(models, name)
+        variant.mkdir(parents=True, exist_ok=True)
+        sdf.write(asset, variant, lod=level, model_name=name)
+        lod_models.append(name)
+    outputs = {str(p.relative_to(folder)): sha256_file(p) for p in sorted(folder.rglob("*")) if p.is_file()}
+    return outputs, lod_models
+
+
+def _inside(root: Path, name: str) -> Path:
+    """root/name, refusing any name that would leave root (ids come from users)."""
+    path = (root / name).resolve()
+    if path.parent != root.resolve():
+        raise UserError(root, name, "output path escapes the build folder")
+    return path
+
+
+def build_asset(staging: Path, asset_toml: str) -> dict:
+    """Task action: one asset's package."""
+    from ..export import manifest
+
+    timings = {}
+    t = time.perf_counter()
+    cfg = config.load_asset_config(Path(asset_toml))
+    asset = read_source(cfg)
+    asset = asset.with_(description=asset.description or cfg.description, category=cfg.category)
+    timings["read"] = time.perf_counter() - t
+    for step in asset_steps(cfg):
+        t = time.perf_counter()
+        asset = step(asset)
+        timings[getattr(step, "__name__", "step")] = time.perf_counter() - t
+    t = time.perf_counter()
+    models = Path(staging) / "models"
+    models.mkdir(parents=True, exist_ok=True)
+    outputs, lod_models = write_package(asset, models)
+    source = {"file": cfg.source.name, "sha256": sha256_file(cfg.source), "config_sha256": sha256_file(cfg.path)}
+    data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
+    manifest.write(data, models / asset.id)
+    timings["write"] = time.perf_counter() - t
+    return {"asset": asset.id, "triangles": [lod["triangles"] for lod in data["lods"]],
+            "errors_m": [lod["error_m"] for lod in data["lods"]], "timings": timings}
+
+
+# --- planning -----------------------------------------------------------------
+
+
+@dataclass
+class Plan:
+    site: config.Site
+    floorplan: ir.FloorPlan
+    assets: dict[str, config.AssetConfig]
+    used: list[str]
+    unused: list[str]
+    problems: list[UserError] = field(default_factory=list)
+    tasks: list[Task] = field(default_factory=list)
+
+
+def scenario_assets(sources: Path) -> set[str]:
+    """Asset ids that scenarios name in their `assets` list (built even if unplaced)."""
+    used: set[str] = set()
+    for path in sorted((Path(sources) / "scenarios").glob("*.toml")):
+        data = config.read_toml(path)
+        used.update(str(a) for a in data.get("assets", []))
+    return used
+
+
+def load_sources(sources: Path) -> Plan:
+    from ..ingest.floorplan import read_floorplan
+
+    sources = Path(sources)
+    site = config.load_site(sources / "site.toml")
+    assets, problems = config.load_assets(sources)
+    if problems:
+        raise problems[0]
+    plan_path = site.root / site.floorplan
+    fp = read_floorplan(plan_path, known_assets=set(assets), levels=set(site.level_names))
+    placed = {p.asset_id for p in fp.placements}
+    used = sorted(placed | (scenario_assets(sources) & set(assets)))
+    unused = sorted(set(assets) - set(used))
+    return Plan(site=site, floorplan=fp, assets=assets, used=used, unused=unused)
+
+
+def plan(sources: Path, only: list[str] | None = None) -> Plan:
+    """The task graph for a sources folder. `only`: just these assets' packages."""
+    p = load_sources(sources)
+    wanted = p.used
+    if only:
+        for a in only:
+            if a not in p.assets:
+                raise UserError(Path(sources) / "assets", a, "no such asset")
+        wanted = sorted(only)
+    asset_code = code_version(*ASSET_CODE)
+    for asset_id in wanted:
+        cfg = p.assets[asset_id]
+        p.tasks.append(Task(
+            name=f"asset:{asset_id}",
+            stage="assets",
+            action=build_asset,
+            args={"asset_toml": str(cfg.path.resolve())},
+            inputs=(cfg.path.resolve(), cfg.source.resolve()),
+            params={"asset": asset_id},
+            code=asset_code,
+            outputs=(f"models/{asset_id}/",),
+            needs_blender=cfg.source.suffix.lower() == ".blend",
+        ))
+    if not only:
+        p.tasks.extend(scene_tasks(p, Path(sources)))
+    return p
+
+
+def scene_tasks(p: Plan, sources: Path) -> list[Task]:
+    """Terrain and scene tasks, when the scene assembly is available."""
+    try:
+        from ..scene import assemble  # noqa: F401
+    except ImportError:
+        return []
+    from ..scene.assemble import scene_task_specs
+
+    return scene_task_specs(p, sources, code_version(*SCENE_CODE))
+
+
+def read_toml_safe(path: Path) -> dict:
+    with open(path, "rb") as f:
+        return tomllib.load(f)

@@ -1,0 +1,140 @@
+"""The `twin` command line: parses flags and calls the layers below, nothing more.
+
+User errors exit 1 with one line naming the file and the object; usage errors exit 2
+(click); long work shows rich progress on stderr.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from .errors import UserError
+
+SOURCES = click.option("--sources", type=click.Path(path_type=Path), default=Path("sources"),
+                       show_default=True, help="sources folder (site.toml, floorplan/, assets/, scenarios/)")
+OUT = click.option("--out", type=click.Path(path_type=Path), default=Path("build"),
+                   show_default=True, help="build folder")
+
+
+def user_errors(fn):
+    """One clear line and exit 1 for bad input; never a traceback."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except UserError as e:
+            click.echo(f"error: {e}", err=True)
+            sys.exit(1)
+
+    return wrapper
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="substation-twin")
+def main():
+    """substation-twin: build georeferenced, LOD-ed substation digital twins."""
+
+
+@main.command()
+@SOURCES
+@user_errors
+def info(sources: Path):
+    """What the sources hold, and what is wrong with them."""
+    from .info import gather, render
+
+    report = gather(sources)
+    render(report)
+    if report.problems:
+        sys.exit(1)
+
+
+@main.command()
+@SOURCES
+@OUT
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="worker processes (default: cores)")
+@click.option("--only", multiple=True, metavar="ASSET", help="build just this asset's package (repeatable)")
+@click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder (default: OUT/.cache)")
+@click.option("--explain", is_flag=True, help="say for each task why it ran or was skipped")
+@click.option("--json", "as_json", is_flag=True, help="print the explanation as JSON on stdout")
+@user_errors
+def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cache: Path | None,
+          explain: bool, as_json: bool):
+    """Build the model packages and the scene."""
+    from .builder.run import build as run_build
+
+    report = run_build(sources, out, jobs=jobs, only=list(only), cache=cache, quiet=as_json)
+    if as_json:
+        click.echo(json.dumps({"tasks": report.explanations, "failed": report.failed}, indent=1, sort_keys=True))
+    elif explain:
+        for e in report.explanations:
+            click.echo(f"{'RAN ' if e['ran'] else 'skip'} {e['task']}: {e['reason']}")
+    if report.failed:
+        for name, msg in report.failed:
+            click.echo(f"error: {name}: {msg}", err=True)
+        sys.exit(1)
+
+
+@main.command()
+@SOURCES
+@OUT
+@user_errors
+def validate(sources: Path, out: Path):
+    """Validate the build; writes OUT/reports/, exits 1 on errors."""
+    from .validate.report import validate_build
+
+    summary = validate_build(sources, out)
+    click.echo(f"{summary['errors']} errors, {summary['warnings']} warnings -> {out / 'reports'}")
+    if summary["errors"]:
+        sys.exit(1)
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(path_type=Path))
+@OUT
+@user_errors
+def run(scenario: Path, out: Path):
+    """Run a scenario: states and variants over time, into OUT/runs/<scenario>/."""
+    from .runtime.run import run_scenario
+
+    summary = run_scenario(scenario, out, out / "runs")
+    click.echo(json.dumps(summary, indent=1, sort_keys=True))
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(path_type=Path), required=False)
+@click.option("--study", is_flag=True, help="the study's six light conditions on the main-tank gauge")
+@OUT
+@user_errors
+def render(scenario: Path | None, study: bool, out: Path):
+    """Render image sets with labels and the study's image metrics."""
+    from .runtime.render import render_scenario, render_study
+
+    if study:
+        render_study(out)
+    elif scenario is not None:
+        render_scenario(scenario, out)
+    else:
+        raise click.UsageError("give a SCENARIO or --study")
+
+
+@main.command()
+@SOURCES
+@OUT
+@click.option("--quick", is_flag=True, help="fewer repeats and sizes (for tests)")
+@user_errors
+def bench(sources: Path, out: Path, quick: bool):
+    """Speed against error for every stage; writes OUT/reports/bench.json and bench.html."""
+    from .bench import run_bench
+
+    path = run_bench(sources, out, quick=quick)
+    click.echo(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,165 @@
+"""COLLADA 1.4.1 writer: one .dae per visual per LOD and one per collision mesh.
+
+The SDF package references these files; each holds one mesh in its own (visual or
+collision) frame, because the SDF <visual><pose> places it. Metres, Z up.
+"""
+
+from __future__ import annotations
+
+import datetime
+from pathlib import Path
+
+import numpy as np
+from lxml import etree
+
+import collada
+from collada import asset as dae_asset
+from collada import geometry as dae_geometry
+from collada import material as dae_material
+from collada import scene as dae_scene
+from collada import source as dae_source
+
+from pipeline import ir
+from pipeline.export import names
+
+# pycollada stamps <created>/<modified> with the current time; a fixed date keeps two
+# builds of the same inputs byte-identical.
+_FIXED_DATE = datetime.datetime(2000, 1, 1, 0, 0, 0)
+_TOOL = "substation-twin"
+# Elements whose text is a list of floats that pycollada formats itself.
+_FLOAT_TAGS = ("color", "float", "matrix")
+
+
+def write(asset: ir.Asset, folder: Path) -> list[str]:
+    """Write every visual LOD and every collision mesh of `asset` under folder/meshes/.
+
+    A visual writes as many LODs as it has (names.mesh_file(link, visual, k) for
+    k < len(visual.lods)); readers fall back to its coarsest one, as Visual.lod does.
+    Returns the package-relative paths written, sorted.
+    """
+    folder = Path(folder)
+    (folder / "meshes").mkdir(parents=True, exist_ok=True)
+    written = []
+    for link, visual in asset.visuals():
+        material = _material(asset, visual)
+        for level, mesh in enumerate(visual.lods):
+            rel = names.mesh_file(link.name, visual.name, level)
+            _write_dae(folder / rel, visual.name, mesh, material)
+            written.append(rel)
+    for link in asset.links:
+        for col in link.collisions:
+            rel = names.collision_file(link.name, col.name)
+            _write_dae(folder / rel, col.name, col.mesh, None)
+            written.append(rel)
+    return sorted(written)
+
+
+def _material(asset: ir.Asset, visual: ir.Visual) -> ir.Material:
+    try:
+        return asset.material(visual.material)
+    except KeyError:
+        # A visual naming no material still exports; grey is what every viewer shows.
+        return ir.Material(visual.material)
+
+
+def _write_dae(path: Path, node_name: str, mesh: ir.Mesh, material: ir.Material | None) -> None:
+    doc, arrays = _document(node_name, mesh, material)
+    doc.save()
+    root = doc.xmlnode.getroot()
+    _reformat_floats(root, arrays)
+    data = etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(data)
+
+
+def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
+    """A pycollada document with one geometry, one material and one node, plus the
+    float arrays by id (pycollada rounds them to 7 digits on save; we write them)."""
+    doc = collada.Collada()
+    doc.assetInfo = dae_asset.Asset(
+        created=_FIXED_DATE,
+        modified=_FIXED_DATE,
+        unitname="meter",
+        unitmeter=1,
+        upaxis=dae_asset.UP_AXIS.Z_UP,
+        contributors=[dae_asset.Contributor(authoring_tool=_TOOL)],
+    )
+    ident = names.safe_name(node_name)
+    arrays, inputs, sources = _sources(ident, mesh)
+    geom = dae_geometry.Geometry(doc, f"{ident}-mesh", node_name, sources)
+    triset = geom.createTriangleSet(np.asarray(mesh.faces, dtype=np.int64).reshape(-1), inputs, "material0")
+    geom.primitives.append(triset)
+    doc.geometries.append(geom)
+
+    bindings = []
+    if material is not None:
+        mat = _phong_material(doc, material)
+        bindings.append(dae_scene.MaterialNode("material0", mat, inputs=[]))
+    node = dae_scene.Node(ident, children=[dae_scene.GeometryNode(geom, bindings)], name=node_name)
+    scene = dae_scene.Scene("Scene", [node])
+    doc.scenes.append(scene)
+    doc.scene = scene
+    return doc, arrays
+
+
+def _sources(ident: str, mesh: ir.Mesh):
+    """Positions, normals (computed when absent) and texcoords, all per vertex, so one
+    index per corner serves every input (same offset)."""
+    normals = mesh.normals if mesh.normals is not None else _vertex_normals(mesh.vertices, mesh.faces)
+    streams = [("VERTEX", f"{ident}-positions", mesh.vertices, ("X", "Y", "Z")),
+               ("NORMAL", f"{ident}-normals", normals, ("X", "Y", "Z"))]
+    if mesh.uvs is not None:
+        streams.append(("TEXCOORD", f"{ident}-texcoords", mesh.uvs, ("S", "T")))
+    arrays, sources = {}, []
+    inputs = dae_source.InputList()
+    for semantic, sid, data, comps in streams:
+        arr = np.array(data, dtype=np.float64).reshape(-1)
+        sources.append(dae_source.FloatSource(sid, arr.copy(), comps))
+        arrays[f"{sid}-array"] = arr
+        inputs.addInput(0, semantic, f"#{sid}", set="0" if semantic == "TEXCOORD" else None)
+    return arrays, inputs, sources
+
+
+def _phong_material(doc, material: ir.Material):
+    p = material.phong()
+    ident = names.safe_name(material.name)
+    effect = dae_material.Effect(
+        f"{ident}-effect", [], "phong",
+        emission=p.emissive, ambient=p.ambient, diffuse=p.diffuse, specular=p.specular,
+        shininess=p.shininess, transparency=material.alpha,
+    )
+    mat = dae_material.Material(f"{ident}-material", material.name, effect)
+    doc.effects.append(effect)
+    doc.materials.append(mat)
+    return mat
+
+
+def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Smooth normals: area-weighted sum of the face normals around each vertex.
+
+    vertices: (n, 3) float64, faces: (m, 3) int -> (n, 3) float64 unit vectors; a vertex
+    with no area around it gets +Z so the file never holds NaN.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    out = np.zeros_like(v)
+    if len(f):
+        face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length = 2 * area
+        for corner in range(3):
+            np.add.at(out, f[:, corner], face_n)
+    length = np.linalg.norm(out, axis=1)
+    ok = length > 1e-300
+    out[ok] /= length[ok, None]
+    out[~ok] = (0.0, 0.0, 1.0)
+    return out
+
+
+def _reformat_floats(root, arrays: dict[str, np.ndarray]) -> None:
+    """Write every float through names.fmt: full precision and one spelling."""
+    for el in root.iter("{*}float_array"):
+        el.text = " ".join(names.fmt(x) for x in arrays[el.get("id")].tolist())
+    for tag in _FLOAT_TAGS:
+        for el in root.iter("{*}" + tag):
+            el.text = " ".join(names.fmt(float(t)) for t in (el.text or "").split())
+    for el in root.iter("{*}unit"):
+        el.set("meter", names.fmt(float(el.get("meter"))))

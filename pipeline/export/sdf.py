@@ -1,0 +1,237 @@
+"""SDF 1.9 writer: model.config and model.sdf of one asset package (or a LOD variant).
+
+Frames follow SDF 1.9 defaults, so no pose needs a `relative_to` attribute:
+a link pose is in the model frame (__model__), a visual/collision/inertial pose in its
+link's frame, a joint pose in its child link's frame, a joint axis in the joint frame.
+Meshes are the package's COLLADA files, referenced as model://<asset id>/meshes/...,
+which lets a LOD variant folder reuse them without copies.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+from lxml import etree
+
+from pipeline import ir
+from pipeline.errors import UserError
+from pipeline.export import names
+
+SDF_VERSION = "1.9"
+_AUTHOR = "substation-twin"
+# A link with no geometry still needs a positive inertia; 10 cm is a plausible part.
+_DEFAULT_EXTENT = 0.1
+# Below this extent a box inertia degenerates; physics engines reject zero moments.
+_MIN_EXTENT = 1e-3
+
+VisualOverrides = Mapping[str, tuple[np.ndarray | None, str | None]]
+
+
+def write(
+    asset: ir.Asset,
+    folder: Path,
+    *,
+    lod: int = 0,
+    model_name: str | None = None,
+    visual_overrides: VisualOverrides | None = None,
+) -> list[str]:
+    """Write folder/model.config and folder/model.sdf; return ["model.config", "model.sdf"].
+
+    lod: which LOD's meshes the visuals reference (a visual with fewer LODs uses its
+         coarsest). model_name: the <model name> and config name (default asset.id).
+    visual_overrides: visual name -> (pose (4, 4) in the link frame or None,
+         material name or None), used by the runtime for per-state model variants.
+    """
+    folder = Path(folder)
+    overrides = dict(visual_overrides or {})
+    _check_overrides(asset, overrides)
+    name = model_name or asset.id
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "model.config").write_bytes(_serialize(_config(asset, name)))
+    (folder / "model.sdf").write_bytes(_serialize(_sdf(asset, name, lod, overrides)))
+    return ["model.config", "model.sdf"]
+
+
+def _check_overrides(asset: ir.Asset, overrides: dict) -> None:
+    known = {v.name for _, v in asset.visuals()}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise ValueError(f"asset {asset.id!r}: visual_overrides name unknown visuals {unknown}")
+
+
+def _serialize(root: etree._Element) -> bytes:
+    return etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
+
+
+def _sub(parent: etree._Element, tag: str, text: str | None = None, **attrib) -> etree._Element:
+    el = etree.SubElement(parent, tag, {k: v for k, v in sorted(attrib.items())})
+    if text is not None:
+        el.text = text
+    return el
+
+
+def _config(asset: ir.Asset, name: str) -> etree._Element:
+    root = etree.Element("model")
+    _sub(root, "name", name)
+    _sub(root, "version", "1.0")
+    _sub(root, "sdf", "model.sdf", version=SDF_VERSION)
+    author = _sub(root, "author")
+    _sub(author, "name", _AUTHOR)
+    _sub(author, "email", "")
+    _sub(root, "description", asset.description or f"{asset.category} {asset.id}")
+    return root
+
+
+def _sdf(asset: ir.Asset, name: str, lod: int, overrides: dict) -> etree._Element:
+    root = etree.Element("sdf", version=SDF_VERSION)
+    model = _sub(root, "model", name=name)
+    if not asset.joints:
+        _sub(model, "static", "true")
+    links = {link.name: link for link in asset.links}
+    for link in asset.links:
+        _link(model, asset, link, lod, overrides)
+    for joint in asset.joints:
+        _joint(model, asset, joint, links)
+    return root
+
+
+def _link(model, asset: ir.Asset, link: ir.Link, lod: int, overrides: dict) -> None:
+    el = _sub(model, "link", name=names.safe_name(link.name))
+    _sub(el, "pose", _pose_text(link.pose))  # default frame: __model__
+    _inertial(el, link)
+    for visual in link.visuals:
+        pose, material = overrides.get(visual.name, (None, None))
+        _visual(el, asset, link, visual, lod, pose, material)
+    for col in link.collisions:
+        c = _sub(el, "collision", name=names.safe_name(col.name))
+        _sub(c, "pose", _pose_text(col.pose))
+        _mesh_geometry(c, asset.id, names.collision_file(link.name, col.name))
+
+
+def _inertial(link_el, link: ir.Link) -> None:
+    """Mass from the IR; a solid box inertia over the link's visual bounds (link frame),
+    centred on them: a plausible tensor for simulation, not a measured one."""
+    lo, hi = _link_bounds(link)
+    size = np.maximum(hi - lo, _MIN_EXTENT)
+    centre = (lo + hi) / 2.0
+    m = float(link.mass)
+    sx, sy, sz = (size**2).tolist()
+    inertial = _sub(link_el, "inertial")
+    centre_pose = np.eye(4)
+    centre_pose[:3, 3] = centre
+    _sub(inertial, "pose", _pose_text(centre_pose))
+    _sub(inertial, "mass", names.fmt(m))
+    inertia = _sub(inertial, "inertia")
+    for tag, value in (("ixx", m * (sy + sz) / 12), ("ixy", 0.0), ("ixz", 0.0),
+                       ("iyy", m * (sx + sz) / 12), ("iyz", 0.0), ("izz", m * (sx + sy) / 12)):
+        _sub(inertia, tag, names.fmt(value))
+
+
+def _link_bounds(link: ir.Link) -> tuple[np.ndarray, np.ndarray]:
+    """(3,), (3,): axis-aligned bounds, in the link frame, of the LOD-0 visual vertices
+    (collision vertices when the link has no visual)."""
+    parts = [(v.pose, v.mesh) for v in link.visuals] or [(c.pose, c.mesh) for c in link.collisions]
+    points = [m.vertices @ p[:3, :3].T + p[:3, 3] for p, m in parts if len(m.vertices)]
+    if not points:
+        half = np.full(3, _DEFAULT_EXTENT / 2)
+        return -half, half
+    allp = np.concatenate(points)
+    return allp.min(axis=0), allp.max(axis=0)
+
+
+def _visual(link_el, asset: ir.Asset, link: ir.Link, visual: ir.Visual, lod: int,
+            pose: np.ndarray | None, material: str | None) -> None:
+    el = _sub(link_el, "visual", name=names.safe_name(visual.name))
+    _sub(el, "pose", _pose_text(visual.pose if pose is None else np.asarray(pose, dtype=np.float64)))
+    level = min(lod, len(visual.lods) - 1)
+    _mesh_geometry(el, asset.id, names.mesh_file(link.name, visual.name, level))
+    _material(el, asset, visual, material or visual.material)
+
+
+def _mesh_geometry(parent, asset_id: str, rel_path: str) -> None:
+    mesh = _sub(_sub(parent, "geometry"), "mesh")
+    _sub(mesh, "uri", f"model://{asset_id}/{rel_path}")
+
+
+def _material(visual_el, asset: ir.Asset, visual: ir.Visual, material_name: str) -> None:
+    try:
+        mat = asset.material(material_name)
+    except KeyError:
+        raise UserError(asset.source or asset.id, visual.name,
+                        f"material {material_name!r} is not among the asset's materials") from None
+    p = mat.phong()
+    el = _sub(visual_el, "material")
+    for tag, rgba in (("ambient", p.ambient), ("diffuse", p.diffuse),
+                      ("specular", p.specular), ("emissive", p.emissive)):
+        _sub(el, tag, _floats(rgba))
+    metal = _sub(_sub(el, "pbr"), "metal")
+    _sub(metal, "metalness", names.fmt(mat.metallic))
+    _sub(metal, "roughness", names.fmt(mat.roughness))
+    if mat.alpha < 1.0:
+        # Classic renderers read the visual's <transparency>, not the colour alpha.
+        _sub(visual_el, "transparency", names.fmt(1.0 - mat.alpha))
+
+
+def _joint(model, asset: ir.Asset, joint: ir.Joint, links: dict[str, ir.Link]) -> None:
+    for end in (joint.parent, joint.child):
+        if end not in links:
+            raise UserError(asset.source or asset.id, joint.name, f"joint names unknown link {end!r}")
+    el = _sub(model, "joint", name=names.safe_name(joint.name), type=joint.type)
+    _sub(el, "parent", names.safe_name(joint.parent))
+    _sub(el, "child", names.safe_name(joint.child))
+    # SDF 1.9: a joint pose is in its child link's frame; the IR gives the pivot in the
+    # model frame, so write child^-1 * pivot (identity when the pivot is the child frame).
+    child = links[joint.child].pose
+    _sub(el, "pose", _pose_text(np.linalg.inv(child) @ joint.pose))
+    if joint.type == "fixed":
+        return
+    axis = _sub(el, "axis")
+    # No expressed_in: the default frame is the joint frame, where the IR axis lives.
+    _sub(axis, "xyz", _floats(_unit(asset, joint)))
+    if joint.type in ("revolute", "prismatic"):
+        limit = _sub(axis, "limit")
+        _sub(limit, "lower", names.fmt(joint.lower if joint.lower is not None else -1e16))
+        _sub(limit, "upper", names.fmt(joint.upper if joint.upper is not None else 1e16))
+        if joint.effort is not None:
+            _sub(limit, "effort", names.fmt(joint.effort))
+        if joint.velocity is not None:
+            _sub(limit, "velocity", names.fmt(joint.velocity))
+
+
+def _unit(asset: ir.Asset, joint: ir.Joint) -> np.ndarray:
+    n = float(np.linalg.norm(joint.axis))
+    if not math.isfinite(n) or n < 1e-9:
+        raise UserError(asset.source or asset.id, joint.name, "joint axis has (near) zero length")
+    return joint.axis / n
+
+
+def _floats(values) -> str:
+    return " ".join(names.fmt(v) for v in values)
+
+
+def _pose_text(matrix: np.ndarray) -> str:
+    xyz, rpy = _xyz_rpy(matrix)
+    return _floats((*xyz, *rpy))
+
+
+def _xyz_rpy(matrix: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """Translation and SDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll)) of a 4x4 pose.
+
+    Robust at and near pitch = +/-90 degrees: yaw comes first (0 at gimbal lock), then
+    pitch and roll are read from Rz(yaw)^T R, so whatever yaw error the near-singular
+    atan2 makes is absorbed into roll and the composed rotation stays exact.
+    """
+    m = np.asarray(matrix, dtype=np.float64)
+    r = m[:3, :3]
+    cos_pitch = math.hypot(r[0, 0], r[1, 0])
+    yaw = math.atan2(r[1, 0], r[0, 0]) if cos_pitch > 1e-12 else 0.0
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    rz_t = np.array([[cy, sy, 0.0], [-sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    r1 = rz_t @ r  # = Ry(pitch) Rx(roll)
+    pitch = math.atan2(-r1[2, 0], r1[0, 0])
+    roll = math.atan2(-r1[1, 2], r1[1, 1])
+    x, y, z = (float(t) for t in m[:3, 3])
+    return (x, y, z), (roll, pitch, yaw)

@@ -1,0 +1,91 @@
+"""`twin info`: what a sources folder holds and what is wrong with it."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rich.console import Console
+from rich.table import Table
+
+from . import config
+from .builder.graph import sha256_file
+from .errors import UserError
+
+
+@dataclass
+class InfoReport:
+    sources: Path
+    site: str = ""
+    assets: dict[str, dict] = field(default_factory=dict)  # id -> category, source, triangles
+    per_level: dict[str, int] = field(default_factory=dict)
+    per_asset: dict[str, int] = field(default_factory=dict)
+    unused: list[str] = field(default_factory=list)
+    ignored: list[tuple[str, int]] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+
+def _triangles(cfg: config.AssetConfig, build: Path) -> int | None:
+    """LOD0 triangles: from a built manifest of the same source, else by reading it."""
+    manifest = build / "models" / cfg.id / "manifest.json"
+    if manifest.is_file():
+        data = json.loads(manifest.read_text())
+        if data.get("source", {}).get("sha256") == sha256_file(cfg.source):
+            return data["lods"][0]["triangles"]
+    from .builder.tasks import read_source
+
+    return read_source(cfg).triangle_count(0)
+
+
+def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
+    sources = Path(sources)
+    r = InfoReport(sources=sources)
+    site = config.load_site(sources / "site.toml")  # without a site nothing else means anything
+    r.site = site.name
+    assets, problems = config.load_assets(sources)
+    r.problems.extend(str(p) for p in problems)
+    for asset_id, cfg in sorted(assets.items()):
+        entry = {"category": cfg.category, "source": cfg.source.name, "triangles": None}
+        try:
+            entry["triangles"] = _triangles(cfg, build)
+        except UserError as e:
+            r.problems.append(str(e))
+        r.assets[asset_id] = entry
+    from .ingest.floorplan import read_floorplan
+
+    try:
+        fp = read_floorplan(site.root / site.floorplan, known_assets=set(assets), levels=set(site.level_names))
+    except UserError as e:
+        r.problems.append(str(e))
+        return r
+    r.per_level = dict(sorted(Counter(p.level for p in fp.placements).items()))
+    r.per_asset = dict(sorted(Counter(p.asset_id for p in fp.placements).items()))
+    from .builder.tasks import scenario_assets
+
+    used = set(r.per_asset) | scenario_assets(sources)
+    r.unused = sorted(set(assets) - used)
+    r.ignored = list(fp.ignored)
+    return r
+
+
+def render(r: InfoReport, console: Console | None = None) -> None:
+    console = console or Console()
+    console.print(f"[bold]{r.site}[/] ({r.sources})")
+    table = Table("category", "asset", "source", "triangles", "placements")
+    for asset_id, a in sorted(r.assets.items(), key=lambda kv: (kv[1]["category"], kv[0])):
+        tri = "?" if a["triangles"] is None else f"{a['triangles']:,}"
+        table.add_row(a["category"], asset_id, a["source"], tri, str(r.per_asset.get(asset_id, 0)))
+    console.print(table)
+    levels = Table("level", "placements")
+    for level, n in r.per_level.items():
+        levels.add_row(level, str(n))
+    levels.add_row("[bold]all", str(sum(r.per_level.values())))
+    console.print(levels)
+    if r.unused:
+        console.print(f"assets no placement or scenario uses: {', '.join(r.unused)}")
+    if r.ignored:
+        console.print("ignored drawing entities: " + ", ".join(f"{k} x{n}" for k, n in r.ignored))
+    for p in r.problems:
+        console.print(f"[red]problem:[/] {p}")

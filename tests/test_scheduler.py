@@ -1,0 +1,111 @@
+"""The scheduler on a toy graph: incremental, cached, locked, kill-safe."""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import toy_graph
+
+HERE = Path(__file__).parent
+
+
+@pytest.fixture
+def src(tmp_path):
+    d = tmp_path / "src"
+    d.mkdir()
+    (d / "a.txt").write_text("alpha")
+    (d / "b.txt").write_text("beta")
+    return d
+
+
+def test_cold_then_noop(src, tmp_path):
+    out = tmp_path / "build"
+    r1 = toy_graph.build(src, out)
+    assert sorted(r1.ran) == ["join", "upper:a", "upper:b"]
+    assert (out / "joined.txt").read_text() == "ALPHA+BETA"
+    r2 = toy_graph.build(src, out)
+    assert r2.ran == []
+    assert {e["reason"] for e in r2.explanations} == {"up to date"}
+
+
+def test_edit_reruns_only_its_chain(src, tmp_path):
+    out = tmp_path / "build"
+    toy_graph.build(src, out)
+    (src / "a.txt").write_text("ALPHA2")
+    r = toy_graph.build(src, out)
+    assert sorted(r.ran) == ["join", "upper:a"]
+    why = {e["task"]: e for e in r.explanations}
+    assert why["upper:a"]["changed"] == [f"input {os.path.relpath(src / 'a.txt', out)}"]
+    assert why["join"]["changed"] == ["dependency upper:a"]
+    assert (out / "joined.txt").read_text() == "ALPHA2+BETA"
+
+
+def test_same_content_new_mtime_runs_nothing(src, tmp_path):
+    out = tmp_path / "build"
+    toy_graph.build(src, out)
+    os.utime(src / "a.txt", (1, 1))  # what a fresh CI checkout does to every file
+    assert toy_graph.build(src, out).ran == []
+
+
+def test_parameter_change_reruns_what_uses_it(src, tmp_path):
+    out = tmp_path / "build"
+    toy_graph.build(src, out)
+    r = toy_graph.build(src, out, sep="-")
+    assert r.ran == ["join"]
+    assert [e["changed"] for e in r.explanations if e["ran"]] == [["parameters"]]
+
+
+def test_shared_cache_fills_an_empty_build(src, tmp_path):
+    cache = tmp_path / "cache"
+    toy_graph.build(src, tmp_path / "b1", cache=cache)
+    r = toy_graph.build(src, tmp_path / "b2", cache=cache)
+    assert r.ran == []
+    assert {e["reason"] for e in r.explanations} == {"restored from cache"}
+    assert (tmp_path / "b2" / "joined.txt").read_text() == "ALPHA+BETA"
+
+
+def _run_script(src, out, delay):
+    env = dict(os.environ, PYTHONPATH=f"{HERE}{os.pathsep}{HERE.parent}")
+    return subprocess.Popen([sys.executable, str(HERE / "toy_graph.py"), str(src), str(out), str(delay)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+
+
+def _leftovers(out: Path) -> list[Path]:
+    return [p for p in out.rglob("*") if ".tmp-" in p.name or p.parent.name == ".staging"]
+
+
+@pytest.mark.parametrize("kill_after", [0.3, 1.2, 2.5])
+def test_sigkill_at_any_point_recovers(src, tmp_path, kill_after):
+    out = tmp_path / "build"
+    proc = _run_script(src, out, delay=0.05)
+    time.sleep(kill_after)
+    os.killpg(proc.pid, signal.SIGKILL)  # the build and its workers, mid-write
+    proc.wait()
+    for p in [out / "up" / "a.txt", out / "up" / "b.txt", out / "joined.txt"]:
+        if p.exists():  # outputs are whole or absent, never half-written
+            assert p.read_text() in ("ALPHA", "BETA", "ALPHA+BETA"), p
+    r = toy_graph.build(src, out)
+    assert (out / "joined.txt").read_text() == "ALPHA+BETA"
+    assert (out / "up" / "a.txt").read_text() == "ALPHA"
+    assert not _leftovers(out)
+    assert toy_graph.build(src, out).ran == []
+
+
+def test_second_concurrent_build_waits(src, tmp_path):
+    out = tmp_path / "build"
+    first = _run_script(src, out, delay=0.3)
+    time.sleep(1.0)
+    second = _run_script(src, out, delay=0.02)
+    o1, e1 = first.communicate(timeout=120)
+    o2, e2 = second.communicate(timeout=120)
+    assert first.returncode == 0 and second.returncode == 0, e1 + e2
+    assert "waiting for another build" in e2
+    assert (out / "joined.txt").read_text() == "ALPHA+BETA"
+    assert o2.strip() == "ran"  # the second found the first's work complete

@@ -1,0 +1,54 @@
+"""A small task graph with cheap actions, to test the scheduler on its own.
+
+sources/a.txt, sources/b.txt -> upper:a, upper:b (copy upper-cased, slowly if asked)
+-> joined (concatenates both). Run as a script to build in a separate process.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from pipeline.builder.graph import Task
+from pipeline.builder.scheduler import Scheduler
+
+
+def upper(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:
+    out = staging / "up" / f"{name}.txt"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    text = Path(src).read_text().upper()
+    with open(out, "w") as f:  # written in pieces so a kill can land mid-file
+        for ch in text:
+            f.write(ch)
+            f.flush()
+            if delay:
+                time.sleep(delay)
+    return {"chars": len(text)}
+
+
+def join(staging: Path, build: str, sep: str) -> dict:
+    parts = [(Path(build) / "up" / f"{n}.txt").read_text() for n in ("a", "b")]
+    out = staging / "joined.txt"
+    out.write_text(sep.join(parts))
+    return {"parts": 2}
+
+
+def tasks(src: Path, build: Path, sep: str = "+", delay: float = 0.0) -> list[Task]:
+    ups = [Task(name=f"upper:{n}", stage="assets", action=upper,
+                args={"src": str(src / f"{n}.txt"), "name": n, "delay": delay},
+                inputs=(src / f"{n}.txt",), params={"n": n}, code="v1", outputs=(f"up/{n}.txt",))
+           for n in ("a", "b")]
+    joined = Task(name="join", stage="scene", action=join, args={"build": str(build), "sep": sep},
+                  deps=("upper:a", "upper:b"), params={"sep": sep}, code="v1", outputs=("joined.txt",))
+    return [*ups, joined]
+
+
+def build(src: Path, out: Path, sep: str = "+", delay: float = 0.0, jobs: int = 2, cache: Path | None = None):
+    return Scheduler(out, cache=cache, jobs=jobs).run(tasks(src, out, sep, delay))
+
+
+if __name__ == "__main__":
+    src, out, delay = Path(sys.argv[1]), Path(sys.argv[2]), float(sys.argv[3])
+    report = build(src, out, delay=delay)
+    print("ran", " ".join(report.ran))
