@@ -14,7 +14,7 @@ from .tasks import plan
 
 def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] | None = None,
           cache: Path | None = None, quiet: bool = False) -> BuildReport:
-    p = plan(Path(sources), only=only or None)
+    p = plan(Path(sources), Path(out), only=only or None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     console = Console(file=sys.stderr, quiet=quiet)

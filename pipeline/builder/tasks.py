@@ -8,7 +8,6 @@ to build/). Each asset task is the asset's whole chain: read -> steps -> writers
 from __future__ import annotations
 
 import time
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,8 +16,8 @@ from ..errors import UserError
 from ..export import names
 from .graph import Task, code_version, sha256_file
 
-ASSET_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest", "pipeline.geometry",
-              "pipeline.export", "pipeline.builder.tasks")
+ASSET_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
+              "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.export", "pipeline.builder.tasks")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
               "pipeline.scene", "pipeline.export", "pipeline.geometry.transform", "pipeline.builder.tasks")
 
@@ -145,7 +144,7 @@ def load_sources(sources: Path) -> Plan:
     return Plan(site=site, floorplan=fp, assets=assets, used=used, unused=unused)
 
 
-def plan(sources: Path, only: list[str] | None = None) -> Plan:
+def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
     """The task graph for a sources folder. `only`: just these assets' packages."""
     p = load_sources(sources)
     wanted = p.used
@@ -169,11 +168,11 @@ def plan(sources: Path, only: list[str] | None = None) -> Plan:
             needs_blender=cfg.source.suffix.lower() == ".blend",
         ))
     if not only:
-        p.tasks.extend(scene_tasks(p, Path(sources)))
+        p.tasks.extend(scene_tasks(p, Path(sources), Path(build)))
     return p
 
 
-def scene_tasks(p: Plan, sources: Path) -> list[Task]:
+def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     """Terrain and scene tasks, when the scene assembly is available."""
     try:
         from ..scene import assemble  # noqa: F401
@@ -181,9 +180,4 @@ def scene_tasks(p: Plan, sources: Path) -> list[Task]:
         return []
     from ..scene.assemble import scene_task_specs
 
-    return scene_task_specs(p, sources, code_version(*SCENE_CODE))
-
-
-def read_toml_safe(path: Path) -> dict:
-    with open(path, "rb") as f:
-        return tomllib.load(f)
+    return scene_task_specs(p, sources, build, code_version(*SCENE_CODE))

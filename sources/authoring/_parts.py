@@ -41,15 +41,33 @@ def mesh(name: str, verts, faces, mat: str, location=(0, 0, 0), rotation=(0, 0, 
     return _link(name, me, mat, location, rotation, scale)
 
 
+BOX_FACES = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+
+
+def box_verts(size, offset=(0.0, 0.0, 0.0)):
+    """The 8 corners of a box of `size` centred on `offset` (faces: BOX_FACES)."""
+    (sx, sy, sz), (ox, oy, oz) = (tuple(s / 2.0 for s in size)), offset
+    return [(ox + x * sx, oy + y * sy, oz + z * sz) for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)]
+
+
 def box(name: str, size, center, mat: str, rotation=(0, 0, 0), bevel: float = 0.0):
-    """An axis-aligned box of `size` (x, y, z) centred on `center`, optionally bevelled."""
-    sx, sy, sz = (s / 2.0 for s in size)
-    verts = [(x * sx, y * sy, z * sz) for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)]
-    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    ob = mesh(name, verts, faces, mat, center, rotation)
+    """A box of `size` (x, y, z) centred on `center`, optionally bevelled."""
+    ob = mesh(name, box_verts(size), BOX_FACES, mat, center, rotation)
     if bevel > 0.0:
         add_bevel(ob, bevel, 2)
     return ob
+
+
+def prism_x(name: str, radius: float, x0: float, x1: float, mat: str, location, scale=(1, 1, 1),
+            segments: int = 16):
+    """A closed round bar along local +X from x0 to x1, stored as plain mesh data (so a
+    negative scale on the object mirrors it)."""
+    ring = [(radius * math.cos(TAU * i / segments), radius * math.sin(TAU * i / segments))
+            for i in range(segments)]
+    verts = [(x, y, z) for x in (x0, x1) for y, z in ring]
+    faces = [(i, (i + 1) % segments, segments + (i + 1) % segments, segments + i) for i in range(segments)]
+    faces += [tuple(range(segments - 1, -1, -1)), tuple(range(segments, 2 * segments))]
+    return mesh(name, verts, faces, mat, location, (0, 0, 0), scale)
 
 
 def revolve(name: str, profile, mat: str, segments: int = 48, location=(0, 0, 0), rotation=(0, 0, 0)):

@@ -1,0 +1,203 @@
+"""thumbnail.png of a model package: a small headless render without Blender.
+
+A pure-numpy z-buffer rasteriser draws the asset's triangles under a fixed 3/4 view
+(orthographic, from the front-right and above: the front faces -Y), Lambert-shaded in
+each visual's base colour on a white background. It is deterministic: no randomness,
+stable sorts, and a PNG without metadata, so a rerun writes the same bytes.
+
+Cost: triangles are rasterised all at once by their pixel bounding boxes (one numpy
+pass over every candidate pixel centre, in bounded chunks); an asset heavier than
+`MAX_TRIANGLES` at LOD0 is drawn from its coarsest LOD, which a 256 px image cannot
+tell apart.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .. import ir
+
+FILE = "thumbnail.png"
+# Above this many LOD0 triangles the coarsest LOD is drawn instead (if there is one).
+MAX_TRIANGLES = 150_000
+# View: azimuth from -Y towards +X, elevation above the horizon (radians).
+AZIMUTH = np.radians(35.0)
+ELEVATION = np.radians(25.0)
+MARGIN = 0.06  # of the image size, on each side
+AMBIENT = 0.3
+# Visuals more transparent than this are skipped: a gauge's glass must not hide its dial.
+MIN_ALPHA = 0.5
+# Candidate pixel samples processed per numpy pass (bounds memory to ~100 MB).
+CHUNK = 1 << 21
+SUPERSAMPLE = 2
+
+
+def write(asset: ir.Asset, folder: Path, size: int = 256) -> list[str]:
+    """Render `asset` to folder/thumbnail.png (size x size RGB); returns the names
+    written, relative to `folder`. Written to a temporary name, then renamed."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    image = render(asset, size)
+    data = _png_bytes(image)
+    tmp = folder / f".{FILE}.tmp"
+    tmp.write_bytes(data)
+    os.replace(tmp, folder / FILE)
+    return [FILE]
+
+
+def render(asset: ir.Asset, size: int = 256) -> np.ndarray:
+    """(size, size, 3) uint8 sRGB image of the asset."""
+    triangles, colors = scene_triangles(asset)
+    ss = size * SUPERSAMPLE
+    linear = rasterise(triangles, colors, ss, view_basis())
+    # Box-filter the supersampled image, then encode sRGB.
+    linear = linear.reshape(size, SUPERSAMPLE, size, SUPERSAMPLE, 3).mean(axis=(1, 3))
+    return _to_srgb8(linear)
+
+
+def view_basis() -> np.ndarray:
+    """(3, 3) rows: screen right, screen up, towards the camera (model frame)."""
+    toward = np.array([np.sin(AZIMUTH) * np.cos(ELEVATION), -np.cos(AZIMUTH) * np.cos(ELEVATION), np.sin(ELEVATION)])
+    right = np.cross(-toward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, -toward)
+    return np.stack([right, up, toward])
+
+
+def scene_triangles(asset: ir.Asset) -> tuple[np.ndarray, np.ndarray]:
+    """All drawn triangles in the model frame and their linear RGB colours.
+
+    Returns triangles: (m, 3, 3) float64, colors: (m, 3) float64."""
+    level = 0
+    if asset.triangle_count(0) > MAX_TRIANGLES:
+        level = asset.lod_count - 1
+    materials = {m.name: m for m in asset.materials}
+    tris, cols = [], []
+    for link, visual in asset.visuals():
+        mat = materials.get(visual.material, ir.Material(visual.material))
+        if mat.alpha < MIN_ALPHA:
+            continue
+        mesh = visual.lod(level)
+        if mesh.triangle_count == 0:
+            continue
+        m = link.pose @ visual.pose
+        v = mesh.vertices @ m[:3, :3].T + m[:3, 3]
+        tris.append(v[mesh.faces])
+        color = np.clip(np.array(mat.base_color[:3]) + np.array(mat.emission), 0.0, 1.0)
+        cols.append(np.broadcast_to(color, (mesh.triangle_count, 3)))
+    if not tris:
+        return np.zeros((0, 3, 3)), np.zeros((0, 3))
+    return np.concatenate(tris), np.concatenate(cols)
+
+
+def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.ndarray) -> np.ndarray:
+    """Z-buffered, flat Lambert-shaded orthographic render.
+
+    triangles: (m, 3, 3) float64 model frame; colors: (m, 3) linear RGB;
+    basis: (3, 3) from view_basis(). Returns (size, size, 3) float64 linear RGB, white
+    where nothing is drawn. The view is fitted to the triangles' projected extent."""
+    image = np.ones((size, size, 3))
+    if len(triangles) == 0:
+        return image
+    cam = triangles @ basis.T  # (m, 3, 3): screen x, screen y, depth (bigger = nearer)
+    lo = cam[:, :, :2].reshape(-1, 2).min(axis=0)
+    hi = cam[:, :, :2].reshape(-1, 2).max(axis=0)
+    scale = size * (1.0 - 2.0 * MARGIN) / max(float((hi - lo).max()), 1e-12)
+    centre = (lo + hi) / 2.0
+    px = (cam[:, :, 0] - centre[0]) * scale + size / 2.0  # (m, 3) pixel columns
+    py = size / 2.0 - (cam[:, :, 1] - centre[1]) * scale  # (m, 3) pixel rows, down
+    depth = cam[:, :, 2]
+
+    shade = _shading(triangles, basis)
+    tri_color = colors * shade[:, None]
+
+    # Edge functions in pixel space; a doubled signed area of 0 is a sliver we skip.
+    x0, x1, x2 = px.T
+    y0, y1, y2 = py.T
+    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    keep = np.abs(area) > 1e-12
+    # Pixel centres (i + 0.5) inside each triangle's bounding box.
+    cx0 = np.clip(np.ceil(px.min(axis=1) - 0.5), 0, size).astype(np.int64)
+    cx1 = np.clip(np.floor(px.max(axis=1) - 0.5), -1, size - 1).astype(np.int64)
+    cy0 = np.clip(np.ceil(py.min(axis=1) - 0.5), 0, size).astype(np.int64)
+    cy1 = np.clip(np.floor(py.max(axis=1) - 0.5), -1, size - 1).astype(np.int64)
+    w = np.maximum(cx1 - cx0 + 1, 0)
+    h = np.maximum(cy1 - cy0 + 1, 0)
+    counts = np.where(keep, w * h, 0)
+    ids = np.flatnonzero(counts)
+
+    best_depth = np.full(size * size, -np.inf)
+    best_tri = np.full(size * size, -1, dtype=np.int64)
+    for chunk in _chunks(ids, counts[ids]):
+        n = counts[chunk]
+        tri = np.repeat(chunk, n)
+        start = np.repeat(np.cumsum(n) - n, n)
+        k = np.arange(len(tri)) - start
+        wi = w[tri]
+        sx = cx0[tri] + k % wi + 0.5
+        sy = cy0[tri] + k // wi + 0.5
+        a = area[tri]
+        # Barycentric weights; all >= 0 (within rounding) inside either winding.
+        b0 = ((x1[tri] - sx) * (y2[tri] - sy) - (x2[tri] - sx) * (y1[tri] - sy)) / a
+        b1 = ((x2[tri] - sx) * (y0[tri] - sy) - (x0[tri] - sx) * (y2[tri] - sy)) / a
+        b2 = 1.0 - b0 - b1
+        inside = (b0 >= -1e-9) & (b1 >= -1e-9) & (b2 >= -1e-9)
+        tri, b0, b1, b2 = tri[inside], b0[inside], b1[inside], b2[inside]
+        pix = (sy[inside] - 0.5).astype(np.int64) * size + (sx[inside] - 0.5).astype(np.int64)
+        z = b0 * depth[tri, 0] + b1 * depth[tri, 1] + b2 * depth[tri, 2]
+        # Nearest sample per pixel: sort by pixel, then nearest first, ties by triangle.
+        order = np.lexsort((tri, -z, pix))
+        pix, z, tri = pix[order], z[order], tri[order]
+        first = np.flatnonzero(np.r_[True, pix[1:] != pix[:-1]])
+        pix, z, tri = pix[first], z[first], tri[first]
+        nearer = z > best_depth[pix]
+        best_depth[pix[nearer]] = z[nearer]
+        best_tri[pix[nearer]] = tri[nearer]
+
+    drawn = best_tri >= 0
+    flat = image.reshape(-1, 3)
+    flat[drawn] = tri_color[best_tri[drawn]]
+    return image
+
+
+def _shading(triangles: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """(m,) Lambert factor of each face under a key light from the upper left behind
+    the camera; two-sided, so a face wound the wrong way is not drawn black."""
+    n = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    length = np.linalg.norm(n, axis=1)
+    n = n / np.where(length > 0, length, 1.0)[:, None]
+    light = basis[2] * 1.0 - basis[0] * 0.4 + basis[1] * 0.6
+    light /= np.linalg.norm(light)
+    return AMBIENT + (1.0 - AMBIENT) * np.abs(n @ light)
+
+
+def _chunks(ids: np.ndarray, counts: np.ndarray):
+    """Split `ids` so that each piece's summed count stays near CHUNK."""
+    if len(ids) == 0:
+        return
+    bounds = np.searchsorted(np.cumsum(counts), np.arange(CHUNK, counts.sum() + CHUNK, CHUNK), side="right")
+    start = 0
+    for end in bounds:
+        end = max(int(end), start + 1)
+        if start < len(ids):
+            yield ids[start:end]
+        start = end
+
+
+def _to_srgb8(linear: np.ndarray) -> np.ndarray:
+    c = np.clip(linear, 0.0, 1.0)
+    srgb = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1.0 / 2.4) - 0.055)
+    return np.round(srgb * 255.0).astype(np.uint8)
+
+
+def _png_bytes(image: np.ndarray) -> bytes:
+    """PNG bytes with no text chunks, time stamp or gamma chunk: pixels only."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(image, mode="RGB").save(buf, format="PNG", optimize=False, compress_level=9)
+    return buf.getvalue()

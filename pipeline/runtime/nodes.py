@@ -1,0 +1,284 @@
+"""Node types of the runtime state graph (DESIGN.md s.6, PAPER_NOTES.md).
+
+A node is a small class: it declares its ports (type and unit), takes its parameters
+once, and maps (t, inputs) -> outputs deterministically. Its only randomness comes from
+`self.rng` (seeded from the scenario seed and the node id) or from seeded functions of
+time (`seeded_uniform`), so a run is reproducible from the scenario file and its seed.
+
+Units are plain strings compared exactly ("%", "degC", "rad", "W/m2", "m", "s", "m3",
+"x" for zoom, "1" for dimensionless); "*" on an input accepts any unit.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import math
+import re
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from . import camera, sun
+
+
+@dataclass(frozen=True)
+class Port:
+    type: str = "float"
+    unit: str = "1"
+    required: bool = True
+
+
+@dataclass(frozen=True)
+class Context:
+    """What every node may know about the run besides its inputs."""
+
+    seed: int
+    start: dt.datetime  # aware local date-time of t = 0
+    step_s: float
+
+
+def stable_hash(text: str) -> int:
+    """A 64-bit integer of a string, identical on every platform and run (unlike hash())."""
+    return int.from_bytes(hashlib.sha256(text.encode("utf-8")).digest()[:8], "little")
+
+
+def node_rng(seed: int, node_id: str) -> np.random.Generator:
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([int(seed), stable_hash(node_id)])))
+
+
+def seeded_uniform(seed: int, stream: str, t: float, low: float, high: float) -> float:
+    """A uniform draw in [low, high) that is a pure function of (seed, stream, t).
+
+    Counter-based (Philox keyed by seed and stream, counter = t in whole milliseconds),
+    so any node can evaluate the same noise at any time, e.g. a signal delayed by 1.2 s
+    reproduces its source's noise exactly. Times closer than 1 ms share a draw.
+    """
+    key = (int(seed) << 64) | stable_hash(stream)
+    counter = int(round(float(t) * 1000.0)) % (1 << 256)
+    return float(np.random.Generator(np.random.Philox(key=key, counter=counter)).uniform(low, high))
+
+
+class Node:
+    """Base class. Subclasses set `type_name`, `inputs`, `outputs`, `params` (name ->
+    default; None = required) and implement `step`."""
+
+    type_name: ClassVar[str] = ""
+    inputs: ClassVar[dict[str, Port]] = {}
+    outputs: ClassVar[dict[str, Port]] = {}
+    params: ClassVar[dict[str, object]] = {}
+
+    def __init__(self, node_id: str, params: dict, ctx: Context):
+        unknown = sorted(set(params) - set(self.params))
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {', '.join(unknown)} for a {self.type_name} node "
+                             f"(known: {', '.join(sorted(self.params)) or 'none'})")
+        missing = sorted(k for k, v in self.params.items() if v is None and k not in params)
+        if missing:
+            raise ValueError(f"missing parameter(s) {', '.join(missing)} for a {self.type_name} node")
+        self.id = node_id
+        self.ctx = ctx
+        self.p = {**self.params, **params}
+        self.rng = node_rng(ctx.seed, node_id)
+
+    # Port look-ups are methods so that a node may have instance-specific ports.
+    def input_port(self, name: str) -> Port | None:
+        return self.inputs.get(name)
+
+    def output_port(self, name: str) -> Port | None:
+        return self.outputs.get(name)
+
+    def output_ports(self) -> dict[str, Port]:
+        return dict(self.outputs)
+
+    def required_inputs(self) -> list[str]:
+        return sorted(k for k, p in self.inputs.items() if p.required)
+
+    def step(self, t: float, inputs: dict) -> dict:
+        raise NotImplementedError
+
+
+def _float(p: dict, key: str) -> float:
+    v = p[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ValueError(f"parameter {key} must be a finite number, got {v!r}")
+    return float(v)
+
+
+class Clock(Node):
+    """Scenario time: t in s since the start, and the UTC instant as Unix seconds."""
+
+    type_name = "clock"
+    outputs = {"t": Port("float", "s"), "epoch": Port("float", "s")}
+
+    def step(self, t, inputs):
+        return {"t": float(t), "epoch": self.ctx.start.timestamp() + float(t)}
+
+
+class Constant(Node):
+    """An externally settable value (an operator input, an ambient temperature)."""
+
+    type_name = "constant"
+    params = {"value": None, "unit": "1", "type": "float"}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        if self.p["type"] not in ("float", "int", "bool"):
+            raise ValueError(f"type must be float, int or bool, got {self.p['type']!r}")
+        self.value = self.p["value"]
+
+    def output_port(self, name):
+        return self.output_ports().get(name)
+
+    def output_ports(self):
+        return {"value": Port(self.p["type"], str(self.p["unit"]))}
+
+    def step(self, t, inputs):
+        return {"value": self.value}
+
+
+class OilTank(Node):
+    """Main-tank oil of the shunt reactor.
+
+    level: the study's trace min(hi, max(lo, l0 - rate t)) * (1 + k (T_env - T_ref)), %.
+    volume: V0 (1 + beta (T_oil - T0)) - leak t, m3 (the study's volume model with a
+    constant leak rate dV_loss(t) = leak_m3_s t). T_oil = T_env + oil_rise_K.
+    T_env comes from the optional input `T_env` when wired, else from the parameter.
+    """
+
+    type_name = "oil_tank"
+    inputs = {"T_env": Port("float", "degC", required=False)}
+    outputs = {"level": Port("float", "%"), "volume": Port("float", "m3"), "T_oil": Port("float", "degC")}
+    params = {"T_env": 35.0, "l0": 100.0, "rate_pct_s": 1.0, "lo": 25.0, "hi": 100.0, "k_T": 0.001,
+              "T_ref": 25.0, "V0": 15.0, "beta": 7.0e-4, "T0": 20.0, "leak_m3_s": 0.0, "oil_rise_K": 0.0}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        self.c = {k: _float(self.p, k) for k in self.params}
+
+    def level_at(self, t: float, t_env: float) -> float:
+        c = self.c
+        return min(c["hi"], max(c["lo"], c["l0"] - c["rate_pct_s"] * t)) * (1.0 + c["k_T"] * (t_env - c["T_ref"]))
+
+    def step(self, t, inputs):
+        c = self.c
+        t_env = float(inputs.get("T_env", c["T_env"]))
+        t_oil = t_env + c["oil_rise_K"]
+        volume = c["V0"] * (1.0 + c["beta"] * (t_oil - c["T0"])) - c["leak_m3_s"] * t
+        return {"level": self.level_at(t, t_env), "volume": volume, "T_oil": t_oil}
+
+
+class Bushing(Node):
+    """Oil level of a bushing's sight glass (%), the study's trace:
+
+    i(t) = i0 + di sin(wi t), v(t) = v0 + dv cos(wv t),
+    base(t) = 50 + 0.08 i(t) + 0.005 (v(t) - v0),
+    level(t) = clip(base(t) + A sin(w t + phi) + xi(t), 30, 100), xi uniform [-2, 2].
+
+    `delay_s` evaluates the whole trace, noise included, at t + delay_s: with the same
+    `noise_stream` (default: the node id) bushing 2 = bushing 1 shifted by 1.2 s exactly.
+    """
+
+    type_name = "bushing"
+    outputs = {"level": Port("float", "%")}
+    params = {"phi": 0.0, "delay_s": 0.0, "noise": 2.0, "noise_stream": "", "amplitude": 25.0, "omega": 0.25,
+              "i0": 200.0, "di": 50.0, "wi": 0.3, "v0": 13800.0, "dv": 500.0, "wv": 0.4, "lo": 30.0, "hi": 100.0}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        self.c = {k: _float(self.p, k) for k in self.params if k != "noise_stream"}
+        self.stream = str(self.p["noise_stream"] or node_id)
+
+    def level_at(self, t: float) -> float:
+        """The trace at absolute scenario time t (no delay applied)."""
+        c = self.c
+        i = c["i0"] + c["di"] * math.sin(c["wi"] * t)
+        v = c["v0"] + c["dv"] * math.cos(c["wv"] * t)
+        base = 50.0 + 0.08 * i + 0.005 * (v - c["v0"])
+        xi = seeded_uniform(self.ctx.seed, self.stream, t, -c["noise"], c["noise"]) if c["noise"] else 0.0
+        return min(c["hi"], max(c["lo"], base + c["amplitude"] * math.sin(c["omega"] * t + c["phi"]) + xi))
+
+    def step(self, t, inputs):
+        return {"level": self.level_at(t + self.c["delay_s"])}
+
+
+class Sun(Node):
+    """Sun elevation/azimuth (rad) and direct horizontal irradiance (W/m2); see sun.py.
+
+    model: "ephemeris" (astral NOAA, geometric unless refraction = true) or "study"
+    (90 sin(pi tau)). Time is the scenario start plus t.
+    """
+
+    type_name = "sun"
+    outputs = {"elevation": Port("float", "rad"), "azimuth": Port("float", "rad"),
+               "irradiance": Port("float", "W/m2")}
+    params = {"lat": None, "lon": None, "model": "ephemeris", "refraction": False,
+              "tau_atm": sun.DEFAULT_TAU_ATM, "G0": sun.G0}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        self.lat, self.lon = _float(self.p, "lat"), _float(self.p, "lon")
+        if not -90.0 <= self.lat <= 90.0 or not -180.0 <= self.lon <= 180.0:
+            raise ValueError(f"lat/lon out of range: {self.lat}, {self.lon}")
+        if self.p["model"] not in ("ephemeris", "study"):
+            raise ValueError(f"model must be 'ephemeris' or 'study', got {self.p['model']!r}")
+        self.tau_atm, self.g0 = _float(self.p, "tau_atm"), _float(self.p, "G0")
+
+    def step(self, t, inputs):
+        when = self.ctx.start + dt.timedelta(seconds=float(t))
+        elev, az = sun.ephemeris(self.lat, self.lon, when, bool(self.p["refraction"]))
+        if self.p["model"] == "study":
+            elev = sun.study_elevation(self.lat, self.lon, when)
+        e = math.radians(elev)
+        return {"elevation": e, "azimuth": math.radians(az), "irradiance": sun.irradiance(e, self.tau_atm, self.g0)}
+
+
+class Camera(Node):
+    """Zoom -> horizontal FOV and clip planes (camera.py). The zoom is the optional
+    input `zoom` when wired, else the parameter; outside [1, 100] is an error."""
+
+    type_name = "camera"
+    inputs = {"zoom": Port("float", "x", required=False)}
+    outputs = {"zoom": Port("float", "x"), "hfov": Port("float", "rad"), "near": Port("float", "m"),
+               "far": Port("float", "m"), "optical": Port("bool", "1")}
+    params = {"zoom": 1.0, "fov_base": camera.FOV_BASE}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        camera.lens(_float(self.p, "zoom"), _float(self.p, "fov_base"))  # reject a bad zoom at load
+
+    def step(self, t, inputs):
+        lens = camera.lens(inputs.get("zoom", self.p["zoom"]), float(self.p["fov_base"]))
+        return {"zoom": lens.zoom, "hfov": lens.hfov, "near": lens.near, "far": lens.far, "optical": lens.optical}
+
+
+_RENDER_PORT = re.compile(r"^([A-Za-z0-9_][A-Za-z0-9_-]*)\.([A-Za-z_][A-Za-z0-9_]*)$")
+
+
+class Render(Node):
+    """The render node: observes `<STATE>.<variable>` inputs (any unit) and keeps their
+    latest values; `mapping.visual_states` turns them into transforms, materials and
+    shape weights through the placements' manifest bindings. A placement whose floor
+    plan STATE is "reactor_A1" is driven by edges to render.reactor_A1.<variable>.
+    `sun` names the sun node the appliers light the scene with (default: the only one).
+    """
+
+    type_name = "render"
+    params = {"sun": "", "sun_intensity_scale": 1.0}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        self.values: dict[str, dict[str, float]] = {}
+
+    def input_port(self, name):
+        return Port("float", "*") if _RENDER_PORT.match(name) else None
+
+    def step(self, t, inputs):
+        for name, value in inputs.items():
+            state, variable = _RENDER_PORT.match(name).groups()
+            self.values.setdefault(state, {})[variable] = float(value)
+        return {}
+
+
+NODE_TYPES: dict[str, type[Node]] = {cls.type_name: cls for cls in (Clock, Constant, OilTank, Bushing, Sun, Camera, Render)}

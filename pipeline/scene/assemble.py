@@ -1,0 +1,164 @@
+"""Scene assembly: the terrain package and the world in SDF, USD and glTF.
+
+Two tasks: `terrain` (a model package built from the platform outlines) and `scene`
+(reads every used package's manifest, places each placement on the globe, picks its
+LOD, writes the three scene files and placements.json).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .. import config
+from ..builder.graph import Task
+from ..export import names
+from . import placements as placing
+from . import scene_gltf, stage_usd, world_sdf
+from .checks import check_placements
+from .terrain import terrain_asset
+
+SUN_HOUR_UTC = 13  # the built scene's sun: early afternoon on the site's date (Brazil, UTC-3)
+
+
+def terrain_model_name(site: config.Site) -> str:
+    return f"{site.name.lower().replace('-', '_').replace('.', '_')}_terrain"
+
+
+def _load(sources: Path):
+    from ..georef import Georeferencer, default_origin
+    from ..ingest.floorplan import read_floorplan
+
+    site = config.load_site(Path(sources) / "site.toml")
+    assets, _ = config.load_assets(Path(sources))
+    fp = read_floorplan(site.root / site.floorplan, known_assets=set(assets), levels=set(site.level_names))
+    origin = site.origin or default_origin(site, fp.platforms)
+    return site, fp, Georeferencer(site, origin)
+
+
+def scene_sun(site: config.Site, origin_llh) -> dict:
+    """Sun of the built scene (the runtime moves it): astral's ephemeris at a fixed
+    time on the site's date; intensity scaled by the study's clear-sky irradiance."""
+    from astral import Observer
+    from astral.sun import azimuth, elevation
+
+    when = dt.datetime.fromisoformat(site.date).replace(hour=SUN_HOUR_UTC, tzinfo=dt.timezone.utc)
+    obs = Observer(latitude=origin_llh[0], longitude=origin_llh[1])
+    el = float(elevation(obs, when))
+    az = float(azimuth(obs, when))
+    s = max(np.sin(np.radians(el)), 0.0)
+    irradiance = 1361.0 * np.exp(-0.2 / s) * s if s > 0 else 0.0
+    return {"elevation_deg": round(el, 9), "azimuth_deg": round(az, 9), "irradiance_w_m2": round(irradiance, 6),
+            "intensity": round(irradiance / 1000.0, 6), "illuminance_lux": round(irradiance * 100.0, 3),
+            "time_utc": when.isoformat()}
+
+
+def build_terrain(staging: Path, sources: str) -> dict:
+    """Task action: the terrain package (all formats) into models/<site>_terrain/."""
+    from ..builder.tasks import write_package
+    from ..export import manifest
+
+    site, fp, georef = _load(Path(sources))
+    name = terrain_model_name(site)
+    asset = terrain_asset(site, list(fp.platforms), georef, name)
+    models = Path(staging) / "models"
+    models.mkdir(parents=True, exist_ok=True)
+    outputs, lod_models = write_package(asset, models)
+    data = manifest.content(asset, source={"file": site.floorplan, "sha256": ""}, outputs=outputs, lod_models=lod_models)
+    manifest.write(data, models / name)
+    return {"terrain": name, "triangles": asset.triangle_count(0)}
+
+
+def build_scene(staging: Path, sources: str, build: str) -> dict:
+    """Task action: the world in SDF, USD and glTF, and placements.json."""
+    from ..export import manifest
+    from .terrain import height_at
+
+    site, fp, georef = _load(Path(sources))
+    models = Path(build) / "models"
+    used = sorted({p.asset_id for p in fp.placements})
+    manifests = {a: manifest.read(models / a) for a in used}
+    placed = placing.place(site, list(fp.placements), georef)
+    eyes = placing.inspection_points_enu(site, georef)
+    placed = placing.choose_lods(placed, manifests, eyes, site)
+    origin = georef.origin_llh
+    sun = scene_sun(site, origin)
+    tname = terrain_model_name(site)
+    terrain_manifest = manifest.read(models / tname)
+
+    out = Path(staging) / "scene"
+    out.mkdir(parents=True, exist_ok=True)
+    world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
+                    terrain_model=tname, sun=sun)
+    stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
+                    crs=site.crs, placed=placed, terrain_model=tname, sun=sun)
+    scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
+                     origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
+
+    terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
+    findings = check_placements(site, fp, placed, manifests, terrain_z)
+    lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
+    record = {
+        "site": site.name, "crs": site.crs,
+        "origin": {"latitude_deg": origin[0], "longitude_deg": origin[1], "height_m": origin[2]},
+        "sun": sun, "terrain": tname, "lod_histogram": lod_hist,
+        "placements": [{
+            "tag": p.placement.tag, "asset": p.placement.asset_id, "level": p.placement.level,
+            "state": p.placement.state, "plan": [p.placement.x, p.placement.y, p.placement.z],
+            "heading_deg": p.placement.heading_deg, "enu": [float(v) for v in p.pose[:3, 3]],
+            "yaw_rad": p.yaw, "lod": p.lod,
+            "distance_m": None if not np.isfinite(p.distance_m) else round(p.distance_m, 6),
+        } for p in sorted(placed, key=lambda p: p.placement.tag)],
+        "findings": findings,
+        "ignored_entities": [list(x) for x in fp.ignored],
+    }
+    (out / "placements.json").write_text(json.dumps(record, sort_keys=True, indent=1) + "\n")
+    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": len(findings)}
+
+
+def _terrain_heights(folder: Path, placed, terrain_manifest, height_at) -> np.ndarray:
+    """Terrain z under each placement, read back from the built terrain glTF so the
+    check tests what was written, not what was meant."""
+    from .. import ir
+
+    doc, binary = scene_gltf.read_glb(folder / names.gltf_file(folder.name))
+    visuals = []
+    for ni, m in scene_gltf.visual_nodes(doc):
+        prim = doc["meshes"][doc["nodes"][ni]["mesh"]]["primitives"][0]
+        pos = _accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+        idx = _accessor(doc, binary, prim["indices"]).reshape(-1, 3)
+        pos = (np.c_[pos, np.ones(len(pos))] @ (scene_gltf.Z_TO_Y.T @ m.T))[:, :3]
+        visuals.append(ir.Visual(str(ni), "x", (ir.Mesh(pos, idx),)))
+    terrain = ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=visuals),))
+    en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))
+    return height_at(terrain, en)
+
+
+def _accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
+    acc = doc["accessors"][index]
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype = {5126: np.float32, 5125: np.uint32, 5123: np.uint16, 5121: np.uint8}[acc["componentType"]]
+    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    arr = np.frombuffer(binary, dtype=dtype, count=acc["count"] * width, offset=start)
+    return arr.reshape(acc["count"], width) if width > 1 else arr
+
+
+def scene_task_specs(plan, sources: Path, build: Path, code: str) -> list[Task]:
+    """The terrain and scene tasks of a build plan."""
+    site = plan.site
+    tname = terrain_model_name(site)
+    sources = Path(sources).resolve()
+    inputs = (site.path.resolve(), (site.root / site.floorplan).resolve(), *(
+        cfg.path.resolve() for cfg in plan.assets.values()))
+    terrain = Task(name="terrain", stage="terrain", action=build_terrain, args={"sources": str(sources)},
+                   inputs=inputs[:2], params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
+    placed_assets = sorted({p.asset_id for p in plan.floorplan.placements})
+    scene = Task(name="scene", stage="scene", action=build_scene,
+                 args={"sources": str(sources), "build": str(Path(build).resolve())},
+                 inputs=inputs[:2], deps=("terrain", *(f"asset:{a}" for a in placed_assets)),
+                 params={"site": site.name}, code=code, outputs=("scene/",))
+    return [terrain, scene]

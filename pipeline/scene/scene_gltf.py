@@ -1,0 +1,283 @@
+"""The glTF scene: one .glb that reuses each model's meshes through
+EXT_mesh_gpu_instancing (a mesh is stored once however often it is placed), MSFT_lod
+for the coarser levels, a KHR_lights_punctual sun, Y up, the geodetic origin in extras.
+
+It reads the built model .glb files (the packages are its input, not the IR).
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from ..export.names import gltf_file
+from .placements import Placed
+
+GLB_MAGIC = 0x46546C67
+CHUNK_JSON = 0x4E4F534A
+CHUNK_BIN = 0x004E4942
+
+# Z-up scene frame -> glTF Y-up: (x, y, z) -> (x, z, -y)
+Z_TO_Y = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)
+
+
+def read_glb(path: Path) -> tuple[dict, bytes]:
+    data = Path(path).read_bytes()
+    magic, version, length = struct.unpack_from("<III", data, 0)
+    if magic != GLB_MAGIC or version != 2:
+        raise ValueError(f"{path}: not a glTF 2.0 binary")
+    offset, doc, bin_chunk = 12, None, b""
+    while offset < length:
+        clen, ctype = struct.unpack_from("<II", data, offset)
+        chunk = data[offset + 8: offset + 8 + clen]
+        if ctype == CHUNK_JSON:
+            doc = json.loads(chunk)
+        elif ctype == CHUNK_BIN:
+            bin_chunk = chunk
+        offset += 8 + clen
+    return doc, bin_chunk
+
+
+def write_glb(path: Path, doc: dict, binary: bytes) -> None:
+    text = json.dumps(doc, sort_keys=True, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)
+    binary = binary + b"\0" * (-len(binary) % 4)
+    total = 12 + 8 + len(text) + (8 + len(binary) if binary else 0)
+    out = struct.pack("<III", GLB_MAGIC, 2, total) + struct.pack("<II", len(text), CHUNK_JSON) + text
+    if binary:
+        out += struct.pack("<II", len(binary), CHUNK_BIN) + binary
+    Path(path).write_bytes(out)
+
+
+def node_matrix(node: dict) -> np.ndarray:
+    if "matrix" in node:
+        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
+    m = np.eye(4)
+    if "scale" in node:
+        m = np.diag([*node["scale"], 1.0]) @ m
+    if "rotation" in node:
+        m = quat_to_matrix(node["rotation"]) @ m
+    if "translation" in node:
+        t = np.eye(4)
+        t[:3, 3] = node["translation"]
+        m = t @ m
+    return m
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    x, y, z, w = (float(v) for v in q)
+    m = np.eye(4)
+    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    return m
+
+
+def matrix_to_quat(r: np.ndarray) -> np.ndarray:
+    """(x, y, z, w) of a 3x3 rotation; Shepperd's method for stability."""
+    t = np.trace(r)
+    if t > 0:
+        s = np.sqrt(t + 1.0) * 2
+        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = np.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k]) * 2
+        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
+        q[i] = 0.25 * s
+        q[j] = (r[j, i] + r[i, j]) / s
+        q[k] = (r[k, i] + r[i, k]) / s
+    q = np.array(q)
+    return q / np.linalg.norm(q) * (1 if q[3] >= 0 else -1)
+
+
+def visual_nodes(doc: dict) -> list[tuple[int, np.ndarray]]:
+    """(node index, global matrix) of every mesh node reachable from the default scene."""
+    out = []
+    scene = doc["scenes"][doc.get("scene", 0)]
+
+    def walk(i, parent):
+        node = doc["nodes"][i]
+        m = parent @ node_matrix(node)
+        if "mesh" in node:
+            out.append((i, m))
+        for c in node.get("children", []):
+            walk(c, m)
+
+    for root in scene["nodes"]:
+        walk(root, np.eye(4))
+    return out
+
+
+class SceneBuilder:
+    """Accumulates meshes copied from model .glb files and instanced nodes."""
+
+    def __init__(self):
+        self.doc = {"asset": {"version": "2.0", "generator": "substation-twin"}, "scene": 0,
+                    "scenes": [{"name": "scene", "nodes": []}], "nodes": [], "meshes": [],
+                    "materials": [], "accessors": [], "bufferViews": [], "buffers": []}
+        self.bin = bytearray()
+        self.used_ext: set[str] = set()
+        self._mesh_cache: dict[tuple[str, int], int] = {}
+        self._material_cache: dict[tuple[str, int], int] = {}
+
+    def _append(self, data: bytes) -> int:
+        self.bin += b"\0" * (-len(self.bin) % 4)
+        off = len(self.bin)
+        self.bin += data
+        return off
+
+    def _copy_accessor(self, src: dict, src_bin: bytes, index: int) -> int:
+        acc = dict(src["accessors"][index])
+        view = src["bufferViews"][acc["bufferView"]]
+        start = view.get("byteOffset", 0)
+        data = src_bin[start: start + view["byteLength"]]
+        new_view = {k: v for k, v in view.items() if k in ("byteLength", "byteStride", "target")}
+        new_view.update(buffer=0, byteOffset=self._append(data))
+        self.doc["bufferViews"].append(new_view)
+        acc["bufferView"] = len(self.doc["bufferViews"]) - 1
+        self.doc["accessors"].append(acc)
+        return len(self.doc["accessors"]) - 1
+
+    def _copy_material(self, key: str, src: dict, index: int) -> int:
+        ck = (key, index)
+        if ck not in self._material_cache:
+            mat = json.loads(json.dumps(src["materials"][index]))
+            for ext in mat.get("extensions", {}):
+                self.used_ext.add(ext)
+            self.doc["materials"].append(mat)
+            self._material_cache[ck] = len(self.doc["materials"]) - 1
+        return self._material_cache[ck]
+
+    def copy_mesh(self, key: str, src: dict, src_bin: bytes, mesh_index: int) -> int:
+        ck = (key, mesh_index)
+        if ck in self._mesh_cache:
+            return self._mesh_cache[ck]
+        mesh = src["meshes"][mesh_index]
+        prims = []
+        for p in mesh["primitives"]:
+            q = {"attributes": {a: self._copy_accessor(src, src_bin, i) for a, i in sorted(p["attributes"].items())},
+                 "mode": p.get("mode", 4)}
+            if "indices" in p:
+                q["indices"] = self._copy_accessor(src, src_bin, p["indices"])
+            if "material" in p:
+                q["material"] = self._copy_material(key, src, p["material"])
+            if "targets" in p:
+                q["targets"] = [{a: self._copy_accessor(src, src_bin, i) for a, i in sorted(t.items())}
+                                for t in p["targets"]]
+            prims.append(q)
+        new = {"name": mesh.get("name", ""), "primitives": prims}
+        if "weights" in mesh:
+            new["weights"] = mesh["weights"]
+        if "extras" in mesh:
+            new["extras"] = mesh["extras"]
+        self.doc["meshes"].append(new)
+        self._mesh_cache[ck] = len(self.doc["meshes"]) - 1
+        return self._mesh_cache[ck]
+
+    def instance_accessors(self, matrices: list[np.ndarray]) -> dict[str, int]:
+        """TRANSLATION / ROTATION / SCALE accessors of instance transforms (Y-up)."""
+        t = np.array([m[:3, 3] for m in matrices], dtype=np.float32)
+        r, s = [], []
+        for m in matrices:
+            scale = np.linalg.norm(m[:3, :3], axis=0)
+            r.append(matrix_to_quat(m[:3, :3] / scale))
+            s.append(scale)
+        out = {}
+        for name, arr, typ in (("TRANSLATION", t, "VEC3"), ("ROTATION", np.array(r, np.float32), "VEC4"),
+                               ("SCALE", np.array(s, np.float32), "VEC3")):
+            view = {"buffer": 0, "byteOffset": self._append(arr.tobytes()), "byteLength": arr.nbytes}
+            self.doc["bufferViews"].append(view)
+            acc = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": 5126,
+                   "count": len(arr), "type": typ}
+            if name == "TRANSLATION":
+                acc["min"] = [float(v) for v in arr.min(axis=0)]
+                acc["max"] = [float(v) for v in arr.max(axis=0)]
+            self.doc["accessors"].append(acc)
+            out[name] = len(self.doc["accessors"]) - 1
+        return out
+
+    def add_node(self, node: dict, root: bool = True) -> int:
+        self.doc["nodes"].append(node)
+        i = len(self.doc["nodes"]) - 1
+        if root:
+            self.doc["scenes"][0]["nodes"].append(i)
+        return i
+
+
+def lod_meshes(doc: dict, node_index: int) -> list[int]:
+    """Mesh indices of a visual node's LOD chain: its own, then MSFT_lod's nodes."""
+    node = doc["nodes"][node_index]
+    chain = [node["mesh"]]
+    for i in node.get("extensions", {}).get("MSFT_lod", {}).get("ids", []):
+        chain.append(doc["nodes"][i]["mesh"])
+    return chain
+
+
+def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str, origin_llh,
+          crs: str, site_name: str, sun: dict) -> None:
+    sb = SceneBuilder()
+    groups: dict[tuple[str, int], list[Placed]] = defaultdict(list)
+    for pl in sorted(placed, key=lambda p: p.placement.tag):
+        groups[(pl.placement.asset_id, pl.lod)].append(pl)
+    sources = {}
+    for asset_id in sorted({a for a, _ in groups} | {terrain_model}):
+        sources[asset_id] = read_glb(models / asset_id / gltf_file(asset_id))
+
+    doc, binary = sources[terrain_model]
+    for ni, m in visual_nodes(doc):
+        mesh = sb.copy_mesh(terrain_model, doc, binary, doc["nodes"][ni]["mesh"])
+        sb.add_node({"name": f"terrain/{doc['nodes'][ni].get('name', ni)}", "mesh": mesh,
+                     "matrix": [float(v) for v in m.T.reshape(16)]} if not np.allclose(m, np.eye(4))
+                    else {"name": f"terrain/{doc['nodes'][ni].get('name', ni)}", "mesh": mesh})
+
+    for (asset_id, lod), members in sorted(groups.items()):
+        doc, binary = sources[asset_id]
+        poses = [Z_TO_Y @ pl.pose @ Z_TO_Y.T for pl in members]
+        for ni, local in visual_nodes(doc):
+            chain = lod_meshes(doc, ni)[lod:] or lod_meshes(doc, ni)[-1:]
+            inst = sb.instance_accessors([p @ local for p in poses])
+            ext = {"EXT_mesh_gpu_instancing": {"attributes": inst}}
+            name = f"{asset_id}/lod{lod}/{doc['nodes'][ni].get('name', ni)}"
+            coarser = []
+            for k, mesh_index in enumerate(chain[1:], start=1):
+                coarser.append(sb.add_node({"name": f"{name}/lod+{k}", "mesh": sb.copy_mesh(asset_id, doc, binary, mesh_index),
+                                            "extensions": {"EXT_mesh_gpu_instancing": {"attributes": inst}}}, root=False))
+            node = {"name": name, "mesh": sb.copy_mesh(asset_id, doc, binary, chain[0]), "extensions": ext,
+                    "extras": {"tags": [pl.placement.tag for pl in members]}}
+            if coarser:
+                ext["MSFT_lod"] = {"ids": coarser}
+                node["extras"]["MSFT_screencoverage"] = [0.2 / 4**k for k in range(len(coarser) + 1)]
+                sb.used_ext.add("MSFT_lod")
+            sb.used_ext.add("EXT_mesh_gpu_instancing")
+            sb.add_node(node)
+
+    d = -np.array([np.sin(np.radians(sun["azimuth_deg"])) * np.cos(np.radians(sun["elevation_deg"])),
+                   np.cos(np.radians(sun["azimuth_deg"])) * np.cos(np.radians(sun["elevation_deg"])),
+                   np.sin(np.radians(sun["elevation_deg"]))])
+    d_y = Z_TO_Y[:3, :3] @ d
+    # a punctual directional light shines along its local -Z
+    z = -d_y / np.linalg.norm(d_y)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
+    y = np.cross(z, x)
+    q = matrix_to_quat(np.stack([x, y, z], axis=1))
+    sb.doc["extensions"] = {"KHR_lights_punctual": {"lights": [
+        {"name": "sun", "type": "directional", "color": [1.0, 0.96, 0.9], "intensity": float(sun["illuminance_lux"])}]}}
+    sb.add_node({"name": "sun", "rotation": [float(v) for v in q], "extensions": {"KHR_lights_punctual": {"light": 0}}})
+    sb.used_ext.add("KHR_lights_punctual")
+
+    sb.doc["scenes"][0]["extras"] = {
+        "site": site_name, "crs": crs, "up": "+Y (glTF); scene frame ENU: x=east, y=up, z=-north",
+        "geodetic_origin": {"latitude_deg": float(origin_llh[0]), "longitude_deg": float(origin_llh[1]),
+                            "height_m": float(origin_llh[2])}}
+    sb.doc["extensionsUsed"] = sorted(sb.used_ext)
+    sb.doc["buffers"] = [{"byteLength": len(sb.bin) + (-len(sb.bin) % 4)}]
+    for key in ("materials", "meshes"):
+        if not sb.doc[key]:
+            del sb.doc[key]
+    write_glb(path, sb.doc, bytes(sb.bin))

@@ -1,0 +1,167 @@
+"""Terraced terrain from the PLATFORM_<level> outlines (DESIGN.md s.2).
+
+Each platform is flat at its level's elevation inside its outline; from its edge a
+slope runs outward and down at the site's ratio (horizontal run per metre of rise)
+to natural ground, where a ground apron of `skirt_width` extends beyond every slope.
+Geometry is built in plan coordinates, then every vertex goes through the exact
+georeferencer, so the terrain and the placements share one frame to the millimetre.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import ir
+from ..config import Site
+
+MAX_EDGE_M = 20.0  # flat tops are subdivided so the ellipsoid's curvature stays < 1 mm
+
+
+def signed_area(poly: np.ndarray) -> float:
+    """poly: (k, 2). Positive when counter-clockwise."""
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def ear_clip(poly: np.ndarray) -> np.ndarray:
+    """Triangulate a simple polygon. poly: (k, 2) counter-clockwise; returns (k-2, 3) int."""
+    idx = list(range(len(poly)))
+    tris = []
+
+    def is_ear(i0, i1, i2):
+        a, b, c = poly[i0], poly[i1], poly[i2]
+        if np.cross(b - a, c - b) <= 1e-12:
+            return False
+        for j in idx:
+            if j in (i0, i1, i2):
+                continue
+            p = poly[j]
+            if (np.cross(b - a, p - a) >= 0 and np.cross(c - b, p - b) >= 0 and np.cross(a - c, p - c) >= 0):
+                return False
+        return True
+
+    guard = 0
+    while len(idx) > 3 and guard < 10 * len(poly) ** 2:
+        guard += 1
+        n = len(idx)
+        for k in range(n):
+            i0, i1, i2 = idx[k - 1], idx[k], idx[(k + 1) % n]
+            if is_ear(i0, i1, i2):
+                tris.append((i0, i1, i2))
+                idx.pop(k)
+                break
+        else:
+            raise ValueError("polygon is not simple")
+    tris.append(tuple(idx))
+    return np.array(tris, dtype=np.int64)
+
+
+def subdivide(points: np.ndarray, tris: np.ndarray, max_edge: float) -> tuple[np.ndarray, np.ndarray]:
+    """Split every triangle in four until no edge exceeds max_edge. points: (n, 2)."""
+    while True:
+        e = points[tris[:, [1, 2, 0]]] - points[tris]
+        if len(tris) == 0 or np.linalg.norm(e, axis=2).max() <= max_edge:
+            return points, tris
+        edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        mids = points[unique].mean(axis=1)
+        base = len(points)
+        points = np.concatenate([points, mids])
+        m = inverse.reshape(3, -1).T + base  # midpoints of edges 01, 12, 20
+        a, b, c = tris.T
+        m01, m12, m20 = m.T
+        tris = np.concatenate([
+            np.stack([a, m01, m20], 1), np.stack([m01, b, m12], 1),
+            np.stack([m20, m12, c], 1), np.stack([m01, m12, m20], 1)])
+
+
+def offset_outline(poly: np.ndarray, distance: float) -> np.ndarray:
+    """Move each vertex of a counter-clockwise polygon outward by `distance` along
+    its corner bisector (mitred), so straight edges move by exactly `distance`."""
+    prev = poly - np.roll(poly, 1, axis=0)
+    nxt = np.roll(poly, -1, axis=0) - poly
+    n1 = np.stack([prev[:, 1], -prev[:, 0]], 1) / np.linalg.norm(prev, axis=1)[:, None]
+    n2 = np.stack([nxt[:, 1], -nxt[:, 0]], 1) / np.linalg.norm(nxt, axis=1)[:, None]
+    bis = n1 + n2
+    bis /= np.linalg.norm(bis, axis=1)[:, None]
+    cos_half = np.clip(np.sum(bis * n1, axis=1), 0.2, 1.0)
+    return poly + bis * (distance / cos_half)[:, None]
+
+
+def terrain_surfaces(site: Site, platforms: list[ir.Platform]) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+    """Plan-space surfaces: (name, xy (n, 2), heights (n,), faces (m, 3)) per piece:
+    each platform's flat top, its slope, and the ground apron."""
+    surfaces = []
+    rings = []
+    for i, pf in enumerate(sorted(platforms, key=lambda p: (p.level, p.handle))):
+        poly = np.asarray(pf.outline, dtype=np.float64)
+        if len(poly) > 1 and np.allclose(poly[0], poly[-1]):
+            poly = poly[:-1]
+        if signed_area(poly) < 0:
+            poly = poly[::-1]
+        elev = site.level(pf.level).elevation
+        top_xy, top_f = subdivide(poly, ear_clip(poly), MAX_EDGE_M)
+        surfaces.append((f"platform_{pf.level}_{i}", top_xy, np.full(len(top_xy), elev), top_f))
+        drop = max(elev - site.natural_ground, 0.0)
+        if drop > 0:
+            outer = offset_outline(poly, drop * site.slope_ratio)
+            k = len(poly)
+            xy = np.concatenate([poly, outer])
+            h = np.concatenate([np.full(k, elev), np.full(k, site.natural_ground)])
+            j = np.arange(k)
+            jn = (j + 1) % k
+            faces = np.concatenate([np.stack([j, j + k, jn + k], 1), np.stack([j, jn + k, jn], 1)])
+            surfaces.append((f"slope_{pf.level}_{i}", xy, h, faces))
+            rings.append(outer)
+        else:
+            rings.append(poly)
+    if rings:
+        allpts = np.concatenate(rings)
+        lo = allpts.min(axis=0) - site.skirt_width
+        hi = allpts.max(axis=0) + site.skirt_width
+        apron = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
+        xy, f = subdivide(apron, np.array([[0, 1, 2], [0, 2, 3]]), 4 * MAX_EDGE_M)
+        # the apron sits 5 cm below natural ground so slopes meet it without z-fighting
+        surfaces.append(("ground", xy, np.full(len(xy), site.natural_ground - 0.05), f))
+    return surfaces
+
+
+def terrain_asset(site: Site, platforms: list[ir.Platform], georef, name: str) -> ir.Asset:
+    """The terrain as an ir.Asset in the scene frame (ENU), one visual per surface,
+    collision = the same triangles (static)."""
+    materials = (
+        ir.Material("gravel", (0.42, 0.4, 0.37, 1.0), 0.0, 0.95),
+        ir.Material("grass", (0.18, 0.26, 0.09, 1.0), 0.0, 0.95),
+        ir.Material("soil", (0.3, 0.22, 0.14, 1.0), 0.0, 0.95),
+    )
+    visuals, collisions = [], []
+    for sname, xy, h, faces in terrain_surfaces(site, platforms):
+        enu = georef.to_enu(xy, h)
+        mesh = ir.Mesh(enu, faces.astype(np.int32))
+        mat = "gravel" if sname.startswith("platform") else ("grass" if sname == "ground" else "soil")
+        visuals.append(ir.Visual(sname, mat, (mesh,)))
+        collisions.append(ir.Collision(sname, mesh))
+    link = ir.Link("terrain", visuals=visuals, collisions=collisions, mass=1.0)
+    return ir.Asset(id=name, category="terrain", links=(link,), materials=materials,
+                    description=f"terraced terrain of {site.name}")
+
+
+def height_at(asset: ir.Asset, en: np.ndarray) -> np.ndarray:
+    """Terrain height (ENU z) under each point en: (n, 2), the highest surface hit;
+    NaN where no surface lies under a point."""
+    out = np.full(len(en), np.nan)
+    for _, v in asset.visuals():
+        m = v.mesh
+        tri = m.vertices[m.faces]  # (t, 3, 3)
+        a, b, c = tri[:, 0, :2], tri[:, 1, :2], tri[:, 2, :2]
+        det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
+        ok = np.abs(det) > 1e-12
+        for i, p in enumerate(en):
+            l1 = ((p[0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (p[1] - a[:, 1])) / np.where(ok, det, 1)
+            l2 = ((b[:, 0] - a[:, 0]) * (p[1] - a[:, 1]) - (p[0] - a[:, 0]) * (b[:, 1] - a[:, 1])) / np.where(ok, det, 1)
+            l0 = 1 - l1 - l2
+            inside = ok & (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
+            if inside.any():
+                z = (l0 * tri[:, 0, 2] + l1 * tri[:, 1, 2] + l2 * tri[:, 2, 2])[inside]
+                out[i] = np.nanmax([out[i], z.max()])
+    return out

@@ -1,0 +1,227 @@
+"""The validators the formats' owners ship, run on written files (DESIGN.md s.7).
+
+Each returns an ExternalResult. A validator that is not installed gives "skipped" with
+how to install it, never "passed": a report must not look clean because a tool was
+missing. Heavy or optional dependencies (pxr, node, libsdformat) are looked up when a
+function runs, so this module imports without them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from lxml import etree
+
+Status = Literal["passed", "failed", "skipped"]
+
+_SDF_HINT = "apt-get install libsdformat12-12 sdformat-sdf ignition-tools (or: bash .ci/install-tools)"
+_USD_HINT = "pip install usd-core (a project dependency: reinstall the environment)"
+_GLTF_HINT = "bash .ci/install-tools (installs node's gltf-validator into tools/node_modules)"
+_COLLADA_HINT = "pip install pycollada lxml (project dependencies: reinstall the environment)"
+
+# The shared library behind `ign sdf -k`; Debian ships the `ign` glue for it (a yaml and
+# a ruby file) only in libsdformat-dev, so without it we call the same entry point.
+_SDFORMAT_LIBRARY = "libsdformat12.so.12"
+_GLTF_MODULE = Path(__file__).resolve().parents[2] / "tools" / "node_modules" / "gltf-validator"
+_TIMEOUT_S = 300
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+@dataclass(frozen=True)
+class ExternalResult:
+    """One external validator's verdict on one file."""
+
+    validator: str
+    target: str
+    status: Status
+    messages: tuple[str, ...] = ()
+    install_hint: str = ""
+
+
+# --- SDF ------------------------------------------------------------------------------
+
+# Runs libsdformat's cmdCheck, the function `ign sdf -k` calls, in a child process: it
+# prints to the C++ streams and may abort, neither of which may touch this process.
+_CMDCHECK = r"""
+import ctypes, sys
+try:
+    lib = ctypes.CDLL(sys.argv[1])
+except OSError as e:
+    print("not installed: %s" % e)
+    sys.exit(127)
+lib.cmdCheck.argtypes = [ctypes.c_char_p]
+lib.cmdCheck.restype = ctypes.c_int
+sys.stdout.flush()
+sys.exit(0 if lib.cmdCheck(sys.argv[2].encode()) == 0 else 1)
+"""
+
+
+def ign_sdf(path: Path, sdf_path: list[Path]) -> ExternalResult:
+    """`ign sdf -k path` with SDF_PATH = sdf_path (folders holding model folders).
+
+    Passes only with exit code 0 and no "Error" in the output (sdformat prints
+    "Valid." in cases it could not check). Runs in an empty working directory so that
+    model:// URIs resolve through SDF_PATH alone, as in Gazebo.
+    """
+    path = Path(path).resolve()
+    env = dict(os.environ, SDF_PATH=os.pathsep.join(str(Path(p).resolve()) for p in sdf_path))
+    ign = shutil.which("ign")
+    if ign is not None and _ign_has_sdf(ign, env):
+        return _run_sdf_check("ign sdf -k", [ign, "sdf", "-k", str(path)], path, env)
+    if ign is None:
+        return _skipped("ign sdf -k", path, "`ign` not found on PATH", _SDF_HINT)
+    # ign-tools without the sdformat command: the library itself is the validator.
+    cmd = [sys.executable, "-c", _CMDCHECK, _SDFORMAT_LIBRARY, str(path)]
+    return _run_sdf_check("libsdformat12 cmdCheck (ign sdf -k)", cmd, path, env)
+
+
+def _ign_has_sdf(ign: str, env: dict) -> bool:
+    """Whether `ign` knows the `sdf` command (ign-tools finds it through yaml files)."""
+    try:
+        out = subprocess.run([ign, "sdf", "--help"], capture_output=True, text=True, env=env, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return out.returncode == 0 and "cannot find" not in (out.stdout + out.stderr)
+
+
+def _run_sdf_check(name: str, cmd: list[str], path: Path, env: dict) -> ExternalResult:
+    with tempfile.TemporaryDirectory() as cwd:
+        try:
+            out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd, timeout=_TIMEOUT_S)
+        except (OSError, subprocess.TimeoutExpired) as e:
+            return ExternalResult(name, str(path), "failed", (f"could not run: {e}",), _SDF_HINT)
+    text = _ANSI.sub("", out.stdout + out.stderr)
+    lines = tuple(line.strip() for line in text.splitlines() if line.strip())
+    if out.returncode == 127 and text.startswith("not installed"):
+        return _skipped(name, path, lines[0], _SDF_HINT)
+    ok = out.returncode == 0 and "Error" not in text and "Valid." in text
+    return ExternalResult(name, str(path), "passed" if ok else "failed",
+                          lines if not ok else (), _SDF_HINT)
+
+
+# --- USD ------------------------------------------------------------------------------
+
+def usd_validation(path: Path) -> ExternalResult:
+    """pxr.UsdValidation with every registered validator; only errors fail. Also checks
+    metersPerUnit == 1 and upAxis == Z, which the validators only require to exist."""
+    name = "pxr.UsdValidation"
+    try:
+        from pxr import Usd, UsdGeom, UsdValidation
+    except ImportError as e:
+        return _skipped(name, path, f"pxr not importable: {e}", _USD_HINT)
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        return ExternalResult(name, str(path), "failed", ("USD could not open the file",), _USD_HINT)
+    registry = UsdValidation.ValidationRegistry()
+    errors = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators()).Validate(stage)
+    messages = [f"{e.GetName()}: {e.GetMessage()}" for e in errors
+                if e.GetType() == UsdValidation.ValidationErrorType.Error]
+    if UsdGeom.GetStageMetersPerUnit(stage) != 1.0:
+        messages.append(f"metersPerUnit is {UsdGeom.GetStageMetersPerUnit(stage)}, expected 1")
+    if UsdGeom.GetStageUpAxis(stage) != UsdGeom.Tokens.z:
+        messages.append(f"upAxis is {UsdGeom.GetStageUpAxis(stage)}, expected Z")
+    return ExternalResult(name, str(path), "failed" if messages else "passed", tuple(sorted(messages)), _USD_HINT)
+
+
+# --- glTF -----------------------------------------------------------------------------
+
+# One node process validates every file: node's start-up costs more than a small glb.
+_GLTF_SCRIPT = r"""
+const fs = require("fs");
+const path = require("path");
+const validator = require(process.argv[1]);
+const files = JSON.parse(fs.readFileSync(0, "utf8"));
+(async () => {
+  const out = [];
+  for (const file of files) {
+    try {
+      const report = await validator.validateBytes(new Uint8Array(fs.readFileSync(file)), {
+        uri: path.basename(file),
+        maxIssues: 100,
+        externalResourceFunction: (uri) => new Promise((resolve, reject) => {
+          fs.readFile(path.resolve(path.dirname(file), decodeURIComponent(uri)),
+                      (err, data) => err ? reject(err.toString()) : resolve(new Uint8Array(data)));
+        }),
+      });
+      const errors = report.issues.messages.filter((m) => m.severity === 0)
+        .map((m) => `${m.code}: ${m.message}${m.pointer ? " at " + m.pointer : ""}`);
+      out.push({file, numErrors: report.issues.numErrors, errors});
+    } catch (e) {
+      out.push({file, numErrors: 1, errors: [String(e)]});
+    }
+  }
+  process.stdout.write(JSON.stringify(out));
+})();
+"""
+
+
+def gltf_validator(paths: list[Path], *, module_dir: Path | None = None) -> list[ExternalResult]:
+    """The Khronos glTF validator on each file, in one node process; 0 errors passes.
+
+    module_dir: the gltf-validator npm package folder (default tools/node_modules/...).
+    Returns one result per path, in the order given.
+    """
+    name = "gltf-validator"
+    module = Path(module_dir) if module_dir is not None else _GLTF_MODULE
+    files = [str(Path(p).resolve()) for p in paths]
+    node = shutil.which("node")
+    if node is None or not (module / "package.json").is_file():
+        why = "`node` not found on PATH" if node is None else f"no gltf-validator in {module}"
+        return [_skipped(name, Path(f), why, _GLTF_HINT) for f in files]
+    if not files:
+        return []
+    try:
+        out = subprocess.run([node, "-e", _GLTF_SCRIPT, str(module.resolve())], input=json.dumps(files),
+                             capture_output=True, text=True, timeout=_TIMEOUT_S)
+        reports = {r["file"]: r for r in json.loads(out.stdout)}
+    except (OSError, subprocess.TimeoutExpired, ValueError) as e:
+        detail = f"validator did not run: {e}"
+        return [ExternalResult(name, f, "failed", (detail,), _GLTF_HINT) for f in files]
+    results = []
+    for f in files:
+        r = reports.get(f, {"numErrors": 1, "errors": ["no report"]})
+        ok = r["numErrors"] == 0
+        results.append(ExternalResult(name, f, "passed" if ok else "failed",
+                                      () if ok else tuple(r["errors"]) or (f"{r['numErrors']} errors",),
+                                      _GLTF_HINT))
+    return results
+
+
+# --- COLLADA --------------------------------------------------------------------------
+
+def collada_schema(path: Path) -> ExternalResult:
+    """pycollada's COLLADA 1.4.1 schema validator on the file, parsed without entity
+    resolution, DTD loading or network access (a .dae is untrusted input)."""
+    name = "pycollada ColladaValidator"
+    try:
+        from collada.schema import ColladaValidator
+    except ImportError as e:
+        return _skipped(name, path, f"pycollada not importable: {e}", _COLLADA_HINT)
+    try:
+        tree = etree.parse(str(path), _hardened_parser())
+    except (OSError, etree.XMLSyntaxError) as e:
+        return ExternalResult(name, str(path), "failed", (f"not well-formed XML: {e}",), _COLLADA_HINT)
+    validator = ColladaValidator()
+    if validator.validate(tree):
+        return ExternalResult(name, str(path), "passed", (), _COLLADA_HINT)
+    log = validator.COLLADA_SCHEMA_1_4_1_INSTANCE.error_log
+    messages = tuple(f"line {e.line}: {e.message}" for e in log) or ("schema validation failed",)
+    return ExternalResult(name, str(path), "failed", messages, _COLLADA_HINT)
+
+
+def _hardened_parser() -> etree.XMLParser:
+    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
+                           dtd_validation=False, huge_tree=False)
+
+
+def _skipped(validator: str, path: Path, why: str, hint: str) -> ExternalResult:
+    return ExternalResult(validator, str(path), "skipped", (f"not installed: {why}",), hint)
