@@ -117,6 +117,13 @@ def full():
     pointer["state_effect"] = "rotate"
     pointer["state_domain"] = [0.0, 1.0]
     pointer["state_range"] = [0.0, 4.0]
+    # UVs: every face gets the full square, so corners shared by faces disagree.
+    uvbox = mesh("uvbox", location=(-3, 3, 0))
+    layer = uvbox.data.uv_layers.new(name="uv")
+    square = [(0, 0), (1, 0), (1, 1), (0, 1)]
+    for poly in uvbox.data.polygons:
+        for corner, loop in enumerate(poly.loop_indices):
+            layer.data[loop].uv = square[corner]
     save("full")
 
 

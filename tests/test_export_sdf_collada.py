@@ -12,6 +12,7 @@ from lxml import etree
 
 from fixtures_assets import articulated_asset, box_mesh, rpy_matrix
 from pipeline import ir
+from pipeline.errors import UserError
 from pipeline.export import collada as collada_writer
 from pipeline.export import names
 from pipeline.export import sdf as sdf_writer
@@ -249,3 +250,11 @@ def test_output_is_byte_identical(tmp_path):
     assert len(written) == len(files) + 2
     for rel in written:
         assert (a / rel).read_bytes() == (b / rel).read_bytes(), rel
+
+
+def test_unknown_material_is_a_user_error(tmp_path):
+    asset = articulated_asset()
+    broken = asset.with_(materials=tuple(m for m in asset.materials if m.name != "lamp_glass"))
+    for writer in (collada_writer.write, sdf_writer.write):
+        with pytest.raises(UserError, match="oil_level.*lamp_glass"):
+            writer(broken, tmp_path / "x")

@@ -20,6 +20,7 @@ from collada import scene as dae_scene
 from collada import source as dae_source
 
 from pipeline import ir
+from pipeline.errors import UserError
 from pipeline.export import names
 
 # pycollada stamps <created>/<modified> with the current time; a fixed date keeps two
@@ -58,8 +59,8 @@ def _material(asset: ir.Asset, visual: ir.Visual) -> ir.Material:
     try:
         return asset.material(visual.material)
     except KeyError:
-        # A visual naming no material still exports; grey is what every viewer shows.
-        return ir.Material(visual.material)
+        raise UserError(asset.source or asset.id, visual.name,
+                        f"material {visual.material!r} is not among the asset's materials") from None
 
 
 def _write_dae(path: Path, node_name: str, mesh: ir.Mesh, material: ir.Material | None) -> None:

@@ -156,7 +156,7 @@ def _set_transform(node: dict, m: np.ndarray) -> None:
     w, x, y, z = quaternion_from_matrix(r)
     if (x, y, z) != (0.0, 0.0, 0.0):
         node["rotation"] = [float(x), float(y), float(z), float(w)]
-    if np.any(np.abs(s - 1.0) > 1e-15):
+    if np.any(np.abs(s - 1.0) > 1e-12):  # not the rounding noise of column norms
         node["scale"] = [float(c) for c in s]
 
 

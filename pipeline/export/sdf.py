@@ -19,6 +19,7 @@ from lxml import etree
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.geometry.transform import matrix_to_xyz_rpy
 
 SDF_VERSION = "1.9"
 _AUTHOR = "substation-twin"
@@ -213,25 +214,6 @@ def _floats(values) -> str:
 
 
 def _pose_text(matrix: np.ndarray) -> str:
-    xyz, rpy = _xyz_rpy(matrix)
-    return _floats((*xyz, *rpy))
-
-
-def _xyz_rpy(matrix: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """Translation and SDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll)) of a 4x4 pose.
-
-    Robust at and near pitch = +/-90 degrees: yaw comes first (0 at gimbal lock), then
-    pitch and roll are read from Rz(yaw)^T R, so whatever yaw error the near-singular
-    atan2 makes is absorbed into roll and the composed rotation stays exact.
-    """
-    m = np.asarray(matrix, dtype=np.float64)
-    r = m[:3, :3]
-    cos_pitch = math.hypot(r[0, 0], r[1, 0])
-    yaw = math.atan2(r[1, 0], r[0, 0]) if cos_pitch > 1e-12 else 0.0
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    rz_t = np.array([[cy, sy, 0.0], [-sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    r1 = rz_t @ r  # = Ry(pitch) Rx(roll)
-    pitch = math.atan2(-r1[2, 0], r1[0, 0])
-    roll = math.atan2(-r1[1, 2], r1[1, 1])
-    x, y, z = (float(t) for t in m[:3, 3])
-    return (x, y, z), (roll, pitch, yaw)
+    # Matrices everywhere else; roll-pitch-yaw only in the file text (DESIGN.md s.3).
+    xyz, rpy = matrix_to_xyz_rpy(matrix)
+    return _floats((*xyz.tolist(), *rpy.tolist()))

@@ -34,6 +34,7 @@ MIN_ALPHA = 0.5
 # Candidate pixel samples processed per numpy pass (bounds memory to ~100 MB).
 CHUNK = 1 << 21
 SUPERSAMPLE = 2
+DEPTH_LEVELS = 1 << 30
 
 
 def write(asset: ir.Asset, folder: Path, size: int = 256) -> list[str]:
@@ -103,43 +104,51 @@ def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.nd
     image = np.ones((size, size, 3))
     if len(triangles) == 0:
         return image
-    cam = triangles @ basis.T  # (m, 3, 3): screen x, screen y, depth (bigger = nearer)
-    lo = cam[:, :, :2].reshape(-1, 2).min(axis=0)
-    hi = cam[:, :, :2].reshape(-1, 2).max(axis=0)
+    # Screen x, screen y and depth (bigger = nearer) of each corner, as contiguous
+    # (m,) arrays: elementwise min/max over three arrays beats axis reductions.
+    corners = [triangles[:, i] @ basis.T for i in range(3)]
+    sx_, sy_, dz_ = ([np.ascontiguousarray(c[:, j]) for c in corners] for j in range(3))
+    lo = np.array([min(a.min() for a in sx_), min(a.min() for a in sy_)])
+    hi = np.array([max(a.max() for a in sx_), max(a.max() for a in sy_)])
     scale = size * (1.0 - 2.0 * MARGIN) / max(float((hi - lo).max()), 1e-12)
     centre = (lo + hi) / 2.0
-    px = (cam[:, :, 0] - centre[0]) * scale + size / 2.0  # (m, 3) pixel columns
-    py = size / 2.0 - (cam[:, :, 1] - centre[1]) * scale  # (m, 3) pixel rows, down
-    depth = cam[:, :, 2]
+    x0, x1, x2 = ((a - centre[0]) * scale + size / 2.0 for a in sx_)  # pixel columns
+    y0, y1, y2 = (size / 2.0 - (a - centre[1]) * scale for a in sy_)  # pixel rows, down
+    d0, d1, d2 = dz_
 
     shade = _shading(triangles, basis)
     tri_color = colors * shade[:, None]
 
-    # Edge functions in pixel space; a doubled signed area of 0 is a sliver we skip.
-    x0, x1, x2 = px.T
-    y0, y1, y2 = py.T
+    # Doubled signed area in pixel space; 0 is a sliver we skip.
     area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
     keep = np.abs(area) > 1e-12
     # Pixel centres (i + 0.5) inside each triangle's bounding box.
-    cx0 = np.clip(np.ceil(px.min(axis=1) - 0.5), 0, size).astype(np.int64)
-    cx1 = np.clip(np.floor(px.max(axis=1) - 0.5), -1, size - 1).astype(np.int64)
-    cy0 = np.clip(np.ceil(py.min(axis=1) - 0.5), 0, size).astype(np.int64)
-    cy1 = np.clip(np.floor(py.max(axis=1) - 0.5), -1, size - 1).astype(np.int64)
+    xmin, xmax = np.minimum(np.minimum(x0, x1), x2), np.maximum(np.maximum(x0, x1), x2)
+    ymin, ymax = np.minimum(np.minimum(y0, y1), y2), np.maximum(np.maximum(y0, y1), y2)
+    cx0 = np.clip(np.ceil(xmin - 0.5), 0, size).astype(np.int64)
+    cx1 = np.clip(np.floor(xmax - 0.5), -1, size - 1).astype(np.int64)
+    cy0 = np.clip(np.ceil(ymin - 0.5), 0, size).astype(np.int64)
+    cy1 = np.clip(np.floor(ymax - 0.5), -1, size - 1).astype(np.int64)
     w = np.maximum(cx1 - cx0 + 1, 0)
     h = np.maximum(cy1 - cy0 + 1, 0)
     counts = np.where(keep, w * h, 0)
     ids = np.flatnonzero(counts)
 
-    best_depth = np.full(size * size, -np.inf)
+    # Depth as a 30-bit integer (nearer = smaller) so one integer sort orders the
+    # samples by pixel, then depth; a stable sort breaks ties by triangle order.
+    dlo, dhi = min(d.min() for d in (d0, d1, d2)), max(d.max() for d in (d0, d1, d2))
+    dscale = (DEPTH_LEVELS - 1) / max(dhi - dlo, 1e-12)
+    best_key = np.full(size * size, np.iinfo(np.int64).max)
     best_tri = np.full(size * size, -1, dtype=np.int64)
     for chunk in _chunks(ids, counts[ids]):
         n = counts[chunk]
         tri = np.repeat(chunk, n)
-        start = np.repeat(np.cumsum(n) - n, n)
-        k = np.arange(len(tri)) - start
+        k = np.arange(len(tri)) - np.repeat(np.cumsum(n) - n, n)
         wi = w[tri]
-        sx = cx0[tri] + k % wi + 0.5
-        sy = cy0[tri] + k // wi + 0.5
+        ix = cx0[tri] + k % wi
+        iy = cy0[tri] + k // wi
+        sx = ix + 0.5
+        sy = iy + 0.5
         a = area[tri]
         # Barycentric weights; all >= 0 (within rounding) inside either winding.
         b0 = ((x1[tri] - sx) * (y2[tri] - sy) - (x2[tri] - sx) * (y1[tri] - sy)) / a
@@ -147,15 +156,16 @@ def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.nd
         b2 = 1.0 - b0 - b1
         inside = (b0 >= -1e-9) & (b1 >= -1e-9) & (b2 >= -1e-9)
         tri, b0, b1, b2 = tri[inside], b0[inside], b1[inside], b2[inside]
-        pix = (sy[inside] - 0.5).astype(np.int64) * size + (sx[inside] - 0.5).astype(np.int64)
-        z = b0 * depth[tri, 0] + b1 * depth[tri, 1] + b2 * depth[tri, 2]
-        # Nearest sample per pixel: sort by pixel, then nearest first, ties by triangle.
-        order = np.lexsort((tri, -z, pix))
-        pix, z, tri = pix[order], z[order], tri[order]
+        pix = iy[inside] * size + ix[inside]
+        z = b0 * d0[tri] + b1 * d1[tri] + b2 * d2[tri]
+        zq = np.clip(((dhi - z) * dscale).astype(np.int64), 0, DEPTH_LEVELS - 1)
+        key = pix * DEPTH_LEVELS + zq
+        order = np.argsort(key, kind="stable")
+        key, pix, tri = key[order], pix[order], tri[order]
         first = np.flatnonzero(np.r_[True, pix[1:] != pix[:-1]])
-        pix, z, tri = pix[first], z[first], tri[first]
-        nearer = z > best_depth[pix]
-        best_depth[pix[nearer]] = z[nearer]
+        key, pix, tri = key[first], pix[first], tri[first]
+        nearer = key < best_key[pix]
+        best_key[pix[nearer]] = key[nearer]
         best_tri[pix[nearer]] = tri[nearer]
 
     drawn = best_tri >= 0
@@ -167,7 +177,12 @@ def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.nd
 def _shading(triangles: np.ndarray, basis: np.ndarray) -> np.ndarray:
     """(m,) Lambert factor of each face under a key light from the upper left behind
     the camera; two-sided, so a face wound the wrong way is not drawn black."""
-    n = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    e1 = triangles[:, 1] - triangles[:, 0]
+    e2 = triangles[:, 2] - triangles[:, 0]
+    n = np.stack(
+        [e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1], e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2], e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]],
+        axis=1,
+    )
     length = np.linalg.norm(n, axis=1)
     n = n / np.where(length > 0, length, 1.0)[:, None]
     light = basis[2] * 1.0 - basis[0] * 0.4 + basis[1] * 0.6

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -62,51 +63,41 @@ def write(asset: ir.Asset, folder: Path) -> list[str]:
     return [rel]
 
 
-def _import_pxr():
+def _import_pxr() -> SimpleNamespace:
+    """The pxr modules this writer uses, imported when it runs (DESIGN.md s.9)."""
     try:
-        import pxr.Usd  # noqa: F401
         from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, UsdSkel, Vt
-    except ImportError as exc:  # optional heavy dependency: fail where used
+    except ImportError as exc:
         raise RuntimeError("the USD writer needs usd-core: pip install usd-core") from exc
-
-    class _Pxr:
-        pass
-
-    p = _Pxr()
-    for mod in (Gf, Kind, Sdf, Usd, UsdGeom, UsdPhysics, UsdShade, UsdSkel, Vt):
-        setattr(p, mod.__name__.split(".")[-1], mod)
-    return p
+    return SimpleNamespace(Gf=Gf, Kind=Kind, Sdf=Sdf, Usd=Usd, UsdGeom=UsdGeom, UsdPhysics=UsdPhysics,
+                           UsdShade=UsdShade, UsdSkel=UsdSkel, Vt=Vt)
 
 
 def _check_names(asset: ir.Asset) -> None:
     """Prim names come from IR names through `safe_name`; two IR names that map to the
     same prim, or a name that takes a reserved slot, would silently merge prims."""
     where = asset.source or asset.id
-    taken = {_LOOKS: "the materials scope", _JOINTS: "the joints scope"}
+    _unique(where, [link.name for link in asset.links], "link", reserved=(_LOOKS, _JOINTS))
     for link in asset.links:
-        key = names.safe_name(link.name)
-        if key in taken:
-            raise UserError(where, link.name, f"link prim name {key!r} clashes with {taken[key]}")
-        taken[key] = f"link {link.name!r}"
-        inner = {_COLLISIONS: "the collisions scope"}
+        _unique(where, [v.name for v in link.visuals], f"visual of link {link.name!r}", reserved=(_COLLISIONS,))
+        _unique(where, [c.name for c in link.collisions], f"collision of link {link.name!r}")
         for v in link.visuals:
-            vkey = names.safe_name(v.name)
-            if vkey in inner:
-                raise UserError(where, v.name, f"visual prim name {vkey!r} clashes with {inner[vkey]}")
-            inner[vkey] = f"visual {v.name!r}"
-        cols: set[str] = set()
-        for c in link.collisions:
-            ckey = names.safe_name(c.name)
-            if ckey in cols:
-                raise UserError(where, c.name, f"collision prim name {ckey!r} is used twice in link {link.name!r}")
-            cols.add(ckey)
-    mats = [names.safe_name(m.name) for m in asset.materials]
-    if len(set(mats)) != len(mats):
-        raise UserError(where, None, "two materials map to the same USD prim name")
+            _unique(where, [k.name for k in v.mesh.shape_keys], f"shape key of visual {v.name!r}")
+    _unique(where, [m.name for m in asset.materials], "material")
+    _unique(where, [j.name for j in asset.joints], "joint")
     defined = {m.name for m in asset.materials}
     for link, v in asset.visuals():
         if v.material not in defined:
             raise UserError(where, v.name, f"visual of link {link.name!r} uses undefined material {v.material!r}")
+
+
+def _unique(where: str, ir_names: list[str], what: str, reserved: tuple[str, ...] = ()) -> None:
+    seen = {r: "a reserved prim" for r in reserved}
+    for name in ir_names:
+        key = names.safe_name(name)
+        if key in seen:
+            raise UserError(where, name, f"{what}: prim name {key!r} is already taken by {seen[key]}")
+        seen[key] = repr(name)
 
 
 def _author(p, stage, asset: ir.Asset) -> None:
@@ -126,6 +117,7 @@ def _author(p, stage, asset: ir.Asset) -> None:
     for link in asset.links:
         _author_link(p, stage, root_path, link, articulated=bool(asset.joints))
     _author_lod_variants(p, stage, root, asset)
+    _author_plain_bindings(p, stage, root, asset, looks)
     _author_state_variants(p, stage, root, asset, looks)
     if asset.joints:
         p.UsdPhysics.ArticulationRootAPI.Apply(root)
@@ -294,21 +286,26 @@ def _author_lod_variants(p, stage, root, asset: ir.Asset) -> None:
         with vset.GetVariantEditContext():
             for link, visual in asset.visuals():
                 mesh = p.UsdGeom.Mesh(stage.GetPrimAtPath(_visual_mesh_path(root.GetPath(), link, visual)))
-                _author_mesh_data(p, mesh, visual.lod(level))
+                # Blend-shape offsets fit only the authored topology: keep it at every level.
+                data = visual.mesh if visual.mesh.shape_keys else visual.lod(level)
+                _author_mesh_data(p, mesh, data)
     vset.SetVariantSelection("lod0")
-    _author_plain_bindings(p, stage, root, asset)
+
+
+def _state_bindings(asset: ir.Asset) -> list[ir.StateBinding]:
+    """`material` bindings that list materials, in a fixed order (variable, target)."""
+    chosen = (b for b in asset.bindings if b.effect == "material" and b.materials)
+    return sorted(chosen, key=lambda b: (b.variable, b.target))
 
 
 def _material_targets(asset: ir.Asset) -> set[str]:
-    return {b.target for b in asset.bindings if b.effect == "material"}
+    return {b.target for b in _state_bindings(asset)}
 
 
-def _author_plain_bindings(p, stage, root, asset: ir.Asset) -> None:
+def _author_plain_bindings(p, stage, root, asset: ir.Asset, looks: dict) -> None:
     """Bind every visual without a material state to its material, outside variants.
     Visuals driven by a material state get their binding only inside the state variants:
     a local binding would be stronger than any variant's."""
-    looks = {m.name: p.UsdShade.Material(stage.GetPrimAtPath(
-        root.GetPath().AppendChild(_LOOKS).AppendChild(names.safe_name(m.name)))) for m in asset.materials}
     driven = _material_targets(asset)
     for link, visual in asset.visuals():
         if visual.name in driven:
@@ -322,7 +319,7 @@ def _author_state_variants(p, stage, root, asset: ir.Asset, looks: dict) -> None
     the states (so every format shows the same default look), else the last state."""
     where = asset.source or asset.id
     by_name = {v.name: (link, v) for link, v in asset.visuals()}
-    for binding in sorted((b for b in asset.bindings if b.effect == "material"), key=lambda b: (b.variable, b.target)):
+    for binding in _state_bindings(asset):
         if binding.target not in by_name:
             raise UserError(where, binding.target, f"state {binding.variable!r} targets a visual that does not exist")
         for name in binding.materials:
@@ -340,8 +337,6 @@ def _author_state_variants(p, stage, root, asset: ir.Asset, looks: dict) -> None
         mats = list(binding.materials)
         default = mats.index(visual.material) if visual.material in mats else len(mats) - 1
         vset.SetVariantSelection(f"s{default}")
-        if not mats:
-            _bind(p, stage.GetPrimAtPath(mesh_path), looks[visual.material])
 
 
 # ---------------------------------------------------------------- joints

@@ -146,26 +146,33 @@ class SurfaceDistance:
         d = point_triangle_distance(pp, self.vertices[t[:, 0]], self.vertices[t[:, 1]], self.vertices[t[:, 2]])
         return d.reshape(len(p), c)
 
-    def __call__(self, points: np.ndarray, chunk: int = 200_000) -> np.ndarray:
-        """(k,) distances from `points: (k, 3)` (same frame as the constructor's vertices)."""
+    def nearest_faces(self, points: np.ndarray, chunk: int = 200_000) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate faces (k, c) int64 of `points: (k, 3)` and their exact distances
+        (k, c): the owners of the nearest index points plus the best one's edge
+        neighbours (they catch the triangle that really holds the closest point when
+        a neighbour's sample happened to be nearer)."""
         points = np.asarray(points, dtype=np.float64) - self.origin
-        if self.tree is None:
-            return np.full(len(points), np.inf)
-        out = np.empty(len(points))
         kk = min(self.candidates, len(self.points))
+        cands, dists = [], []
         for start in range(0, len(points), chunk):
             p = points[start:start + chunk]
             _, idx = self.tree.query(p, k=kk, workers=-1)
             cand = self.owner[idx.reshape(len(p), kk)]
             d = self._distances(p, cand)
-            # the nearest candidate's edge neighbours catch the triangle that really
-            # holds the closest point when a neighbour's sample happened to be nearer
             best = cand[np.arange(len(p)), d.argmin(axis=1)]
             ring = self.neighbours[best]
             ring = np.where(ring >= 0, ring, best[:, None])
-            d2 = self._distances(p, ring)
-            out[start:start + chunk] = np.minimum(d.min(axis=1), d2.min(axis=1))
-        return out
+            cands.append(np.concatenate([cand, ring], axis=1))
+            dists.append(np.concatenate([d, self._distances(p, ring)], axis=1))
+        if not cands:
+            return np.zeros((0, kk + 3), dtype=np.int64), np.zeros((0, kk + 3))
+        return np.concatenate(cands), np.concatenate(dists)
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """(k,) distances from `points: (k, 3)` (same frame as the constructor's vertices)."""
+        if self.tree is None:
+            return np.full(len(points), np.inf)
+        return self.nearest_faces(points)[1].min(axis=1)
 
 
 def query_points(vertices: np.ndarray, faces: np.ndarray, samples: int = DEFAULT_SAMPLES, seed: int = 0) -> np.ndarray:

@@ -525,7 +525,7 @@ def _material(bpy, path: Path, name: str) -> ir.Material:
 
 def _principled(mat):
     """The Principled BSDF feeding the material output, else the first one."""
-    if not mat.use_nodes or mat.node_tree is None:
+    if mat.node_tree is None:
         return None
     nodes = [n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"]
     for node in nodes:

@@ -143,7 +143,7 @@ class Graph:
             raise UserError(f, e.label, f"node {sn} ({self.nodes[sn].type_name}) has no output {sp!r} (outputs: {known})")
         inp = self.nodes[dn].input_port(dp)
         if inp is None:
-            known = ", ".join(sorted(self.nodes[dn].inputs)) or "none"
+            known = ", ".join(self.nodes[dn].input_names()) or "none"
             raise UserError(f, e.label, f"node {dn} ({self.nodes[dn].type_name}) has no input {dp!r} (inputs: {known})")
         for side, port in (("source", out), ("target", inp)):
             if port.type != e.type:
@@ -183,6 +183,8 @@ class Graph:
             path.append(n)
             n = pred[n][0]
         cycle = path[seen[n]:][::-1]
+        i = cycle.index(min(cycle))  # start at the smallest id: the message is stable
+        cycle = cycle[i:] + cycle[:i]
         return cycle + [cycle[0]]
 
 

@@ -86,6 +86,9 @@ class Node:
     def input_port(self, name: str) -> Port | None:
         return self.inputs.get(name)
 
+    def input_names(self) -> list[str]:
+        return sorted(self.inputs)
+
     def output_port(self, name: str) -> Port | None:
         return self.outputs.get(name)
 
@@ -136,6 +139,36 @@ class Constant(Node):
 
     def step(self, t, inputs):
         return {"value": self.value}
+
+
+class Linear(Node):
+    """y = gain x + offset: a sensor calibration or unit conversion between nodes
+    (e.g. gain 100 to turn a 0..1 fraction into %). Its input is required."""
+
+    type_name = "linear"
+    params = {"gain": 1.0, "offset": 0.0, "unit_in": "1", "unit_out": "1"}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        self.gain, self.offset = _float(self.p, "gain"), _float(self.p, "offset")
+
+    def input_port(self, name):
+        return Port("float", str(self.p["unit_in"])) if name == "x" else None
+
+    def required_inputs(self):
+        return ["x"]
+
+    def input_names(self):
+        return ["x"]
+
+    def output_port(self, name):
+        return self.output_ports().get(name)
+
+    def output_ports(self):
+        return {"y": Port("float", str(self.p["unit_out"]))}
+
+    def step(self, t, inputs):
+        return {"y": self.gain * float(inputs["x"]) + self.offset}
 
 
 class OilTank(Node):
@@ -274,6 +307,9 @@ class Render(Node):
     def input_port(self, name):
         return Port("float", "*") if _RENDER_PORT.match(name) else None
 
+    def input_names(self):
+        return ["<STATE>.<variable>"]
+
     def step(self, t, inputs):
         for name, value in inputs.items():
             state, variable = _RENDER_PORT.match(name).groups()
@@ -281,4 +317,117 @@ class Render(Node):
         return {}
 
 
-NODE_TYPES: dict[str, type[Node]] = {cls.type_name: cls for cls in (Clock, Constant, OilTank, Bushing, Sun, Camera, Render)}
+NODE_TYPES: dict[str, type[Node]] = {cls.type_name: cls for cls in (Clock, Constant, Linear, OilTank, Bushing, Sun, Camera, Render)}
+
+
+# --- the render node's mapping M_k ----------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Observed:
+    """A placement the render node drives: floor-plan TAG and STATE, its asset's
+    manifest.json (as plain data) and package folder."""
+
+    tag: str
+    state: str
+    asset: str
+    manifest: dict
+    package: object = None  # pathlib.Path of build/models/<asset>/ when known
+
+
+@dataclass(frozen=True)
+class BindingOutput:
+    binding: dict  # the manifest's binding record
+    value: float  # the state value (e.g. oil level in %)
+    output: float | int  # M_k(value): angle, distance, factor, weight, or material index
+
+
+@dataclass(frozen=True, eq=False)
+class VisualState:
+    """One bound visual at one instant.
+
+    rest, transform: (4, 4) float64 in the link frame; transform = rest @ delta_1 @ ...
+    in binding order (rotation about / translation along / scale along the binding axis,
+    expressed in the visual's frame). material: the selected material, or None when no
+    material binding drives this visual. shape_weights: shape key -> weight.
+    """
+
+    tag: str
+    link: str
+    visual: str
+    rest: np.ndarray
+    transform: np.ndarray
+    material: str | None
+    shape_weights: dict
+    outputs: tuple[BindingOutput, ...]
+
+
+def state_binding(record: dict):
+    """ir.StateBinding of a manifest binding record."""
+    from .. import ir
+
+    return ir.StateBinding(
+        variable=record["variable"], effect=record["effect"], target=record["target"],
+        domain=tuple(record["domain"]), range=tuple(record.get("range") or (0.0, 1.0)),
+        axis=tuple(record.get("axis") or (0.0, 0.0, 1.0)), shape_key=record.get("shape_key"),
+        materials=tuple(record.get("materials") or ()), thresholds=tuple(record.get("thresholds") or ()))
+
+
+def delta_matrix(effect: str, axis, output: float) -> np.ndarray:
+    """(4, 4) float64 change of a visual's pose for a rotate/translate/scale output."""
+    a = np.asarray(axis, dtype=np.float64)
+    n = np.linalg.norm(a)
+    a = a / n if n > 0 else np.array([0.0, 0.0, 1.0])
+    m = np.eye(4)
+    if effect == "rotate":
+        # Rodrigues: R = I + sin(x) K + (1 - cos(x)) K^2, K the cross-product matrix of a.
+        k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+        m[:3, :3] = np.eye(3) + math.sin(output) * k + (1.0 - math.cos(output)) * (k @ k)
+    elif effect == "translate":
+        m[:3, 3] = a * output
+    elif effect == "scale":
+        # Stretch along the axis only (an oil column grows in height, not in width).
+        m[:3, :3] = np.eye(3) + (float(output) - 1.0) * np.outer(a, a)
+    return m
+
+
+def visual_states(values: dict[str, dict[str, float]], observed: list[Observed]) -> list[VisualState]:
+    """Map the render node's values through every observed placement's bindings.
+
+    values: STATE -> variable -> value. Visuals whose variables are not fed are left
+    out (they keep their rest look). Sorted by (tag, link, visual).
+    """
+    out = []
+    for ob in sorted(observed, key=lambda o: o.tag):
+        fed = values.get(ob.state, {})
+        by_visual: dict[tuple[str, str], list[dict]] = {}
+        for rec in ob.manifest.get("bindings", []):
+            if rec["variable"] in fed and rec.get("link"):
+                by_visual.setdefault((rec["link"], rec["target"]), []).append(rec)
+        for (link, visual), recs in sorted(by_visual.items()):
+            rest = np.array(recs[0].get("rest_pose") or np.eye(4).reshape(16), dtype=np.float64).reshape(4, 4)
+            m, material, weights, outs = rest.copy(), None, {}, []
+            for rec in recs:
+                b = state_binding(rec)
+                value = fed[b.variable]
+                y = b.output(value)
+                outs.append(BindingOutput(rec, value, y))
+                if b.effect == "material":
+                    material = b.materials[y] if b.materials else None
+                elif b.effect == "shape":
+                    weights[b.shape_key or ""] = float(y)
+                else:
+                    m = m @ delta_matrix(b.effect, b.axis, float(y))
+            out.append(VisualState(ob.tag, link, visual, rest, m, material, weights, tuple(outs)))
+    return out
+
+
+def unbound_inputs(values_ports: list[str], observed: list[Observed]) -> list[str]:
+    """Render inputs `STATE.variable` that no observed placement binds (likely typos)."""
+    bound = {(o.state, r["variable"]) for o in observed for r in o.manifest.get("bindings", [])}
+    bad = []
+    for port in values_ports:
+        m = _RENDER_PORT.match(port)
+        if m and (m.group(1), m.group(2)) not in bound:
+            bad.append(port)
+    return sorted(bad)

@@ -8,6 +8,7 @@ function runs, so this module imports without them.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -15,6 +16,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -33,6 +35,9 @@ _COLLADA_HINT = "pip install pycollada lxml (project dependencies: reinstall the
 _SDFORMAT_LIBRARY = "libsdformat12.so.12"
 _GLTF_MODULE = Path(__file__).resolve().parents[2] / "tools" / "node_modules" / "gltf-validator"
 _TIMEOUT_S = 300
+# Loading the COLLADA schema costs ~0.3 s; keep one validator per thread (a validator's
+# error log is per instance, so threads must not share one).
+_LOCAL = threading.local()
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -75,7 +80,7 @@ def ign_sdf(path: Path, sdf_path: list[Path]) -> ExternalResult:
     path = Path(path).resolve()
     env = dict(os.environ, SDF_PATH=os.pathsep.join(str(Path(p).resolve()) for p in sdf_path))
     ign = shutil.which("ign")
-    if ign is not None and _ign_has_sdf(ign, env):
+    if ign is not None and _ign_has_sdf(ign, os.environ.get("IGN_CONFIG_PATH", "")):
         return _run_sdf_check("ign sdf -k", [ign, "sdf", "-k", str(path)], path, env)
     if ign is None:
         return _skipped("ign sdf -k", path, "`ign` not found on PATH", _SDF_HINT)
@@ -84,10 +89,12 @@ def ign_sdf(path: Path, sdf_path: list[Path]) -> ExternalResult:
     return _run_sdf_check("libsdformat12 cmdCheck (ign sdf -k)", cmd, path, env)
 
 
-def _ign_has_sdf(ign: str, env: dict) -> bool:
-    """Whether `ign` knows the `sdf` command (ign-tools finds it through yaml files)."""
+@functools.lru_cache(maxsize=None)
+def _ign_has_sdf(ign: str, ign_config_path: str) -> bool:
+    """Whether `ign` knows the `sdf` command: ign-tools finds commands through yaml files
+    in its own share folder and IGN_CONFIG_PATH, hence the cache key."""
     try:
-        out = subprocess.run([ign, "sdf", "--help"], capture_output=True, text=True, env=env, timeout=60)
+        out = subprocess.run([ign, "sdf", "--help"], capture_output=True, text=True, timeout=60)
     except (OSError, subprocess.TimeoutExpired):
         return False
     return out.returncode == 0 and "cannot find" not in (out.stdout + out.stderr)
@@ -210,9 +217,18 @@ def collada_schema(path: Path) -> ExternalResult:
         tree = etree.parse(str(path), _hardened_parser())
     except (OSError, etree.XMLSyntaxError) as e:
         return ExternalResult(name, str(path), "failed", (f"not well-formed XML: {e}",), _COLLADA_HINT)
-    validator = ColladaValidator()
-    if validator.validate(tree):
-        return ExternalResult(name, str(path), "passed", (), _COLLADA_HINT)
+    if tree.docinfo.internalDTD is not None or tree.docinfo.externalDTD is not None:
+        # COLLADA needs no DTD; one here can only declare entities (XXE, billion laughs).
+        return ExternalResult(name, str(path), "failed",
+                              ("document declares a DOCTYPE; entities are not resolved",), _COLLADA_HINT)
+    validator = getattr(_LOCAL, "collada", None)
+    if validator is None:
+        validator = _LOCAL.collada = ColladaValidator()
+    try:
+        if validator.validate(tree):
+            return ExternalResult(name, str(path), "passed", (), _COLLADA_HINT)
+    except etree.Error as e:  # lxml raises on trees it cannot validate at all
+        return ExternalResult(name, str(path), "failed", (f"schema validation error: {e}",), _COLLADA_HINT)
     log = validator.COLLADA_SCHEMA_1_4_1_INSTANCE.error_log
     messages = tuple(f"line {e.line}: {e.message}" for e in log) or ("schema validation failed",)
     return ExternalResult(name, str(path), "failed", messages, _COLLADA_HINT)

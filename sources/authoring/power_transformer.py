@@ -51,26 +51,22 @@ def radiators_and_fans() -> None:
         for k, y in enumerate((-1.5, 0.0, 1.5), start=1):
             shroud = [(0.42, 0.0), (0.45, 0.0), (0.45, 0.25), (0.42, 0.25)]
             P.revolve(f"fan_{side}_{k}_shroud", shroud, "painted_grey", 64, (x, y, 0.3))
-            blade = P.mesh(f"fan_{side}_{k}_blades", P.box_verts((0.06, 0.38, 0.012), (0.0, 0.22, 0.0)),
-                           P.BOX_FACES, "painted_grey", (x, y, 0.45), (0.25, 0.0, 0.0))
+            fan_blades(f"fan_{side}_{k}_blades", (x, y, 0.45))
             P.cylinder(f"fan_{side}_{k}_hub", 0.07, 0.1, (x, y, 0.42), "painted_grey", "Z", 24)
-            blade.modifiers.new("blades", "ARRAY")  # placeholder replaced below
-            blade.modifiers.remove(blade.modifiers["blades"])
-            _radial_copies(blade, 5)
 
 
-def _radial_copies(ob, count: int) -> None:
-    """Spread `count` copies of a fan blade around the hub: an Array modifier whose
-    offset object is an Empty turned 1/count of a turn (the Empty joins the object)."""
-    pivot = kit.bpy.data.objects.new(f"{ob.name}_pivot", None)
-    kit.bpy.context.scene.collection.objects.link(pivot)
-    pivot.rotation_euler = (0.0, 0.0, kit.TAU / count)
-    pivot.parent = ob
-    mod = ob.modifiers.new("radial", "ARRAY")
-    mod.count = count
-    mod.use_relative_offset = False
-    mod.use_object_offset = True
-    mod.offset_object = pivot
+def fan_blades(name: str, center, count: int = 5):
+    """`count` pitched blades around a vertical hub, as one mesh."""
+    verts, faces = [], []
+    for k in range(count):
+        a = kit.TAU * k / count
+        c, s = math.cos(a), math.sin(a)
+        for x, y, z in P.box_verts((0.14, 0.34, 0.01), (0.0, 0.24, 0.0)):
+            # Pitch each blade 20 degrees about its own radial axis, then turn it into place.
+            x, z = x * math.cos(0.35) - z * math.sin(0.35), x * math.sin(0.35) + z * math.cos(0.35)
+            verts.append((x * c - y * s, x * s + y * c, z))
+        faces += [tuple(8 * k + i for i in f) for f in P.BOX_FACES]
+    return P.mesh(name, verts, faces, "painted_grey", center)
 
 
 def bushings() -> None:

@@ -1,0 +1,192 @@
+"""The external validators: pass on good files, fail on broken ones, skip (never pass)
+when the tool is missing, and never resolve external XML entities."""
+
+from __future__ import annotations
+
+import json
+import struct
+import sys
+
+import pytest
+from lxml import etree
+
+from fixtures_assets import articulated_asset
+from pipeline.export import collada as collada_writer
+from pipeline.export import sdf as sdf_writer
+from pipeline.validate import external
+
+
+def _glb(document: dict) -> bytes:
+    """A binary glTF holding only a JSON chunk (padded with spaces to 4 bytes)."""
+    body = json.dumps(document, sort_keys=True).encode()
+    body += b" " * (-len(body) % 4)
+    chunk = struct.pack("<II", len(body), 0x4E4F534A) + body
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunk)) + chunk
+
+
+@pytest.fixture(scope="module")
+def package(tmp_path_factory):
+    parent = tmp_path_factory.mktemp("models")
+    asset = articulated_asset()
+    collada_writer.write(asset, parent / asset.id)
+    sdf_writer.write(asset, parent / asset.id)
+    return parent, asset
+
+
+def _require_sdf(result):
+    if result.status == "skipped":
+        pytest.skip(result.messages[0])
+
+
+# --- SDF -------------------------------------------------------------------------------
+
+def test_sdf_good_and_broken(package, tmp_path):
+    parent, asset = package
+    good = external.ign_sdf(parent / asset.id / "model.sdf", [parent])
+    _require_sdf(good)
+    assert good.status == "passed", good.messages
+
+    text = (parent / asset.id / "model.sdf").read_text()
+    broken = tmp_path / "broken.sdf"
+    broken.write_text(text.replace("<child>arm</child>", "<child>no_such_link</child>"))
+    result = external.ign_sdf(broken, [parent])
+    assert result.status == "failed"
+    assert any("no_such_link" in m for m in result.messages)
+
+
+def test_sdf_unconvertible_version_fails_despite_valid(package, tmp_path):
+    # sdformat 12 prints "Valid." and exits 0 for 1.10; the "Error" line must fail it.
+    parent, asset = package
+    newer = tmp_path / "newer.sdf"
+    newer.write_text((parent / asset.id / "model.sdf").read_text().replace('version="1.9"', 'version="1.10"', 1))
+    result = external.ign_sdf(newer, [parent])
+    _require_sdf(result)
+    assert result.status == "failed", result
+
+
+def test_sdf_include_resolves_only_through_sdf_path(package, tmp_path):
+    parent, asset = package
+    world = tmp_path / "world.sdf"
+    world.write_text('<?xml version="1.0"?>\n<sdf version="1.9"><world name="w">'
+                     f"<include><uri>model://{asset.id}</uri></include></world></sdf>\n")
+    found = external.ign_sdf(world, [tmp_path / "empty", parent])
+    _require_sdf(found)
+    assert found.status == "passed", found.messages
+    missing = external.ign_sdf(world, [tmp_path / "empty"])
+    assert missing.status == "failed"
+    assert any(f"model://{asset.id}" in m for m in missing.messages)
+
+
+# --- COLLADA ---------------------------------------------------------------------------
+
+def test_collada_good_and_broken(package, tmp_path):
+    parent, asset = package
+    good = parent / asset.id / "meshes" / "base__body__lod0.dae"
+    assert external.collada_schema(good).status == "passed"
+    bad = tmp_path / "bad.dae"
+    bad.write_text(good.read_text().replace("<up_axis>Z_UP</up_axis>", "<up_axis>SIDEWAYS</up_axis>"))
+    result = external.collada_schema(bad)
+    assert result.status == "failed" and any("up_axis" in m for m in result.messages)
+    junk = tmp_path / "junk.dae"
+    junk.write_text("<COLLADA><unclosed>")
+    assert external.collada_schema(junk).status == "failed"
+
+
+def test_collada_parser_does_not_resolve_external_entities(package, tmp_path):
+    """The entity would read a file holding Z_UP and make the document valid; unresolved,
+    the document is invalid. A resolving parser is the control that proves it."""
+    from collada.schema import ColladaValidator
+
+    parent, asset = package
+    secret = tmp_path / "secret.txt"
+    secret.write_text("Z_UP")
+    text = (parent / asset.id / "meshes" / "base__body__lod0.dae").read_text()
+    doctype = f'<!DOCTYPE COLLADA [<!ENTITY xxe SYSTEM "{secret.as_uri()}">]>\n'
+    body = text.split("?>", 1)[1].replace("<up_axis>Z_UP</up_axis>", "<up_axis>&xxe;</up_axis>")
+    evil = tmp_path / "evil.dae"
+    evil.write_text('<?xml version="1.0" encoding="utf-8"?>\n' + doctype + body.lstrip())
+
+    resolving = etree.parse(str(evil), etree.XMLParser(resolve_entities=True, load_dtd=True))
+    assert "Z_UP" in etree.tostring(resolving).decode()  # the entity does read the file
+    assert ColladaValidator().validate(resolving)
+
+    result = external.collada_schema(evil)
+    assert result.status == "failed"
+    assert not any("Z_UP" in m for m in result.messages)
+    hardened = etree.parse(str(evil), external._hardened_parser())
+    assert hardened.getroot().find(".//{*}up_axis").text is None  # &xxe; left as a reference
+    assert "Z_UP" not in etree.tostring(hardened.getroot()).decode()
+
+
+# --- glTF ------------------------------------------------------------------------------
+
+def test_gltf_one_process_many_files(tmp_path):
+    good = tmp_path / "good.glb"
+    good.write_bytes(_glb({"asset": {"version": "2.0"}, "scene": 0, "scenes": [{}]}))
+    dangling = tmp_path / "dangling.glb"
+    dangling.write_bytes(_glb({"asset": {"version": "2.0"},
+                               "meshes": [{"primitives": [{"attributes": {"POSITION": 5}}]}]}))
+    truncated = tmp_path / "truncated.glb"
+    truncated.write_bytes(good.read_bytes()[:20])
+    results = external.gltf_validator([good, dangling, truncated])
+    if results[0].status == "skipped":
+        pytest.skip(results[0].messages[0])
+    assert [r.target for r in results] == [str(p) for p in (good, dangling, truncated)]
+    assert [r.status for r in results] == ["passed", "failed", "failed"], results
+    assert any("UNRESOLVED_REFERENCE" in m or "POSITION" in m for m in results[1].messages)
+
+
+# --- USD -------------------------------------------------------------------------------
+
+def _stage(path, meters: float, up: str):
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, meters)
+    UsdGeom.SetStageUpAxis(stage, up)
+    stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/root").GetPrim())
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_usd_units_and_axis_are_checked(tmp_path):
+    pytest.importorskip("pxr")
+    assert external.usd_validation(_stage(tmp_path / "ok.usda", 1.0, "Z")).status == "passed"
+    cm = external.usd_validation(_stage(tmp_path / "cm.usda", 0.01, "Z"))
+    assert cm.status == "failed" and any("metersPerUnit" in m for m in cm.messages)
+    y_up = external.usd_validation(_stage(tmp_path / "y.usda", 1.0, "Y"))
+    assert y_up.status == "failed" and any("upAxis" in m for m in y_up.messages)
+
+
+def test_usd_validator_errors_fail(tmp_path):
+    pytest.importorskip("pxr")
+    bare = tmp_path / "bare.usda"
+    bare.write_text('#usda 1.0\n\ndef Xform "root"\n{\n}\n')  # no defaultPrim, units or axis
+    result = external.usd_validation(bare)
+    assert result.status == "failed"
+    assert any("DefaultPrim" in m for m in result.messages)
+
+
+# --- missing tools ---------------------------------------------------------------------
+
+def test_missing_tools_are_skipped_with_install_hint(package, tmp_path, monkeypatch):
+    parent, asset = package
+    monkeypatch.setenv("PATH", "")
+    sdf = external.ign_sdf(parent / asset.id / "model.sdf", [parent])
+    glb = tmp_path / "x.glb"
+    glb.write_bytes(_glb({"asset": {"version": "2.0"}}))
+    (gltf,) = external.gltf_validator([glb])
+    for result in (sdf, gltf):
+        assert result.status == "skipped"
+        assert ".ci/install-tools" in result.install_hint
+    assert "libsdformat12-12 sdformat-sdf ignition-tools" in sdf.install_hint
+
+
+def test_missing_gltf_module_and_pxr_are_skipped(tmp_path, monkeypatch):
+    glb = tmp_path / "x.glb"
+    glb.write_bytes(_glb({"asset": {"version": "2.0"}}))
+    (gltf,) = external.gltf_validator([glb], module_dir=tmp_path / "no_module")
+    assert gltf.status == "skipped" and "no gltf-validator" in gltf.messages[0]
+    monkeypatch.setitem(sys.modules, "pxr", None)  # import pxr now raises ImportError
+    usd = external.usd_validation(tmp_path / "any.usda")
+    assert usd.status == "skipped" and "usd-core" in usd.install_hint
