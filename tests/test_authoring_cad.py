@@ -150,7 +150,9 @@ def blend_digest(path: Path) -> str:
             "print(digest_blend(sys.argv[2]))")
     done = subprocess.run([sys.executable, "-c", code, str(AUTHORING), str(path)],
                           check=True, capture_output=True, text=True)
-    return done.stdout.strip().splitlines()[-1]
+    digest = done.stdout.strip().splitlines()[-1]
+    assert len(digest) == 64  # a sha256 hex digest, not an error message
+    return digest
 
 
 @pytest.mark.blender

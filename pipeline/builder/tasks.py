@@ -54,12 +54,12 @@ def asset_steps(cfg: config.AssetConfig) -> list:
 def write_package(asset: ir.Asset, models: Path) -> tuple[dict[str, str], list[str]]:
     """Every format of one asset into models/<id>/, LOD variants beside it.
     Returns (package-relative path -> sha256, LOD variant model names)."""
-    from ..export import collada, gltf, sdf, thumbnail, usd
+    from ..export import PACKAGE_FORMATS, sdf, writer
 
     folder = _inside(models, asset.id)
     folder.mkdir(parents=True, exist_ok=True)
-    for writer in (collada.write, sdf.write, usd.write, gltf.write, thumbnail.write):
-        writer(asset, folder)
+    for fmt in PACKAGE_FORMATS:
+        writer(fmt)(asset, folder)
     lod_models = []
     for level in range(1, asset.lod_count):
         name = names.lod_model_name(asset.id, level)

@@ -121,44 +121,28 @@ def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.nd
 
     # Doubled signed area in pixel space; 0 is a sliver we skip.
     area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-    keep = np.abs(area) > 1e-12
-    # Pixel centres (i + 0.5) inside each triangle's bounding box.
-    xmin, xmax = np.minimum(np.minimum(x0, x1), x2), np.maximum(np.maximum(x0, x1), x2)
-    ymin, ymax = np.minimum(np.minimum(y0, y1), y2), np.maximum(np.maximum(y0, y1), y2)
-    cx0 = np.clip(np.ceil(xmin - 0.5), 0, size).astype(np.int64)
-    cx1 = np.clip(np.floor(xmax - 0.5), -1, size - 1).astype(np.int64)
-    cy0 = np.clip(np.ceil(ymin - 0.5), 0, size).astype(np.int64)
-    cy1 = np.clip(np.floor(ymax - 0.5), -1, size - 1).astype(np.int64)
-    w = np.maximum(cx1 - cx0 + 1, 0)
-    h = np.maximum(cy1 - cy0 + 1, 0)
-    counts = np.where(keep, w * h, 0)
-    ids = np.flatnonzero(counts)
+    ids = np.flatnonzero(np.abs(area) > 1e-12)
+    # Depth plane of each triangle: z = d0 + gx (x - x0) + gy (y - y0).
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gx = ((d1 - d0) * (y2 - y0) - (d2 - d0) * (y1 - y0)) / area
+        gy = ((d2 - d0) * (x1 - x0) - (d1 - d0) * (x2 - x0)) / area
+    rows_tri, rows_y, span_x0, span_n = _spans(ids, (x0, x1, x2), (y0, y1, y2), size)
 
     # Depth as a 30-bit integer (nearer = smaller) so one integer sort orders the
     # samples by pixel, then depth; a stable sort breaks ties by triangle order.
-    dlo, dhi = min(d.min() for d in (d0, d1, d2)), max(d.max() for d in (d0, d1, d2))
+    dlo = min(d.min() for d in (d0, d1, d2))
+    dhi = max(d.max() for d in (d0, d1, d2))
     dscale = (DEPTH_LEVELS - 1) / max(dhi - dlo, 1e-12)
     best_key = np.full(size * size, np.iinfo(np.int64).max)
     best_tri = np.full(size * size, -1, dtype=np.int64)
-    for chunk in _chunks(ids, counts[ids]):
-        n = counts[chunk]
-        tri = np.repeat(chunk, n)
-        k = np.arange(len(tri)) - np.repeat(np.cumsum(n) - n, n)
-        wi = w[tri]
-        ix = cx0[tri] + k % wi
-        iy = cy0[tri] + k // wi
-        sx = ix + 0.5
-        sy = iy + 0.5
-        a = area[tri]
-        # Barycentric weights; all >= 0 (within rounding) inside either winding.
-        b0 = ((x1[tri] - sx) * (y2[tri] - sy) - (x2[tri] - sx) * (y1[tri] - sy)) / a
-        b1 = ((x2[tri] - sx) * (y0[tri] - sy) - (x0[tri] - sx) * (y2[tri] - sy)) / a
-        b2 = 1.0 - b0 - b1
-        inside = (b0 >= -1e-9) & (b1 >= -1e-9) & (b2 >= -1e-9)
-        tri, b0, b1, b2 = tri[inside], b0[inside], b1[inside], b2[inside]
-        pix = iy[inside] * size + ix[inside]
-        z = b0 * d0[tri] + b1 * d1[tri] + b2 * d2[tri]
+    for rows in _chunks(np.flatnonzero(span_n), span_n):
+        n = span_n[rows]
+        tri = np.repeat(rows_tri[rows], n)
+        iy = np.repeat(rows_y[rows], n)
+        ix = np.repeat(span_x0[rows], n) + (np.arange(len(tri)) - np.repeat(np.cumsum(n) - n, n))
+        z = d0[tri] + gx[tri] * (ix + 0.5 - x0[tri]) + gy[tri] * (iy + 0.5 - y0[tri])
         zq = np.clip(((dhi - z) * dscale).astype(np.int64), 0, DEPTH_LEVELS - 1)
+        pix = iy * size + ix
         key = pix * DEPTH_LEVELS + zq
         order = np.argsort(key, kind="stable")
         key, pix, tri = key[order], pix[order], tri[order]
@@ -172,6 +156,43 @@ def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.nd
     flat = image.reshape(-1, 3)
     flat[drawn] = tri_color[best_tri[drawn]]
     return image
+
+
+def _spans(ids, xs, ys, size):
+    """Scanline spans of triangles `ids`: for every pixel row whose centre line crosses
+    a triangle, the run of pixel centres inside it. Work is proportional to the
+    pixels covered, not to bounding boxes (a long diagonal sliver has a huge box).
+
+    Returns per row: triangle, row index, first column, number of columns (>= 0)."""
+    x0, x1, x2 = (x[ids] for x in xs)
+    y0, y1, y2 = (y[ids] for y in ys)
+    ymin = np.minimum(np.minimum(y0, y1), y2)
+    ymax = np.maximum(np.maximum(y0, y1), y2)
+    cy0 = np.clip(np.ceil(ymin - 0.5), 0, size).astype(np.int64)
+    cy1 = np.clip(np.floor(ymax - 0.5), -1, size - 1).astype(np.int64)
+    h = np.maximum(cy1 - cy0 + 1, 0)
+    r = np.repeat(np.arange(len(ids)), h)
+    iy = np.repeat(cy0, h) + (np.arange(len(r)) - np.repeat(np.cumsum(h) - h, h))
+    sy = iy + 0.5
+    xl = np.full(len(r), np.inf)
+    xr = np.full(len(r), -np.inf)
+    for (xa, ya), (xb, yb) in (((x0, y0), (x1, y1)), ((x1, y1), (x2, y2)), ((x2, y2), (x0, y0))):
+        # Each edge from its lower to its upper end, so the two triangles sharing it
+        # compute bit-identical crossings (no cracks between them).
+        swap = yb < ya
+        xlo, ylo = np.where(swap, xb, xa), np.where(swap, yb, ya)
+        xhi, yhi = np.where(swap, xa, xb), np.where(swap, ya, yb)
+        xlo, ylo, xhi, yhi = xlo[r], ylo[r], xhi[r], yhi[r]
+        hit = (ylo <= sy) & (sy <= yhi) & (yhi > ylo)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = xlo + (sy - ylo) * ((xhi - xlo) / (yhi - ylo))
+        xl = np.where(hit, np.minimum(xl, x), xl)
+        xr = np.where(hit, np.maximum(xr, x), xr)
+    valid = np.isfinite(xl) & np.isfinite(xr)
+    first = np.clip(np.ceil(np.where(valid, xl, 0.0) - 0.5 - 1e-9), 0, size).astype(np.int64)
+    last = np.clip(np.floor(np.where(valid, xr, -1.0) - 0.5 + 1e-9), -1, size - 1).astype(np.int64)
+    count = np.where(valid, np.maximum(last - first + 1, 0), 0)
+    return ids[r], iy, first, count
 
 
 def _shading(triangles: np.ndarray, basis: np.ndarray) -> np.ndarray:

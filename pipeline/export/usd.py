@@ -356,14 +356,15 @@ def _axis_frame(axis: np.ndarray) -> tuple[np.ndarray, str]:
     r = np.eye(4)
     if token is not None:
         return r, token
-    x = np.array([1.0, 0.0, 0.0])
-    c = float(np.dot(x, a))
-    if c < -1.0 + 1e-12:  # a = -X: half turn about Z
-        r[:3, :3] = np.diag([-1.0, -1.0, 1.0])
-        return r, "X"
-    v = np.cross(x, a)
+    # Rodrigues from u = +X or -X, whichever is nearer to a (so 1 + c >= 1 stays well
+    # conditioned); starting from -X prepends a half turn about Z, which takes X to -X.
+    flip = a[0] < 0.0
+    u = np.array([-1.0 if flip else 1.0, 0.0, 0.0])
+    v, c = np.cross(u, a), float(np.dot(u, a))
     vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    r[:3, :3] = np.eye(3) + vx + vx @ vx / (1.0 + c)  # Rodrigues, taking x onto a
+    r[:3, :3] = np.eye(3) + vx + vx @ vx / (1.0 + c)
+    if flip:
+        r[:3, :3] = r[:3, :3] @ np.diag([-1.0, -1.0, 1.0])
     return r, "X"
 
 
