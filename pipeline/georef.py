@@ -50,6 +50,16 @@ def _per_point(h, n: int) -> np.ndarray:
     return a
 
 
+def _transform(t: Transformer, *cols: np.ndarray) -> list[np.ndarray]:
+    """t.transform on (n,) float64 columns, returning (n,) arrays. pyproj sends size-1
+    arrays down its scalar fast path (a numpy deprecation, and scalars back): pad them."""
+    cols = [np.asarray(c, dtype=np.float64).reshape(-1) for c in cols]
+    n = len(cols[0])
+    if n == 1:
+        cols = [np.repeat(c, 2) for c in cols]
+    return [np.asarray(o, dtype=np.float64)[:n] for o in t.transform(*cols)]
+
+
 def plan_to_crs(xy, site) -> np.ndarray:
     """Plant grid -> projected CRS: E = E0 + s (x cos r - y sin r), N = N0 + s (x sin r + y cos r).
 
@@ -97,8 +107,8 @@ def default_origin(site, platforms: Sequence[ir.Platform]) -> tuple[float, float
     centre = (pts.min(axis=0) + pts.max(axis=0)) / 2.0
     en = plan_to_crs(centre[None, :], site)[0]
     h = min(lv.elevation for lv in site.levels)
-    lon, lat, hw = _to_wgs84(site).transform(en[0], en[1], h)
-    return float(lat), float(lon), float(hw)
+    lon, lat, hw = _transform(_to_wgs84(site), en[0:1], en[1:2], np.array([h]))
+    return float(lat[0]), float(lon[0]), float(hw[0])
 
 
 def enu_rotation(lat_deg: float, lon_deg: float) -> np.ndarray:
@@ -137,22 +147,20 @@ class Georeferencer:
             " +step +proj=cart +ellps=WGS84"
             f" +step +proj=topocentric +ellps=WGS84 +lon_0={lon0!r} +lat_0={lat0!r} +h_0={h0!r}"
         )
-        e, n, _ = self._from_wgs84.transform(lon0, lat0, h0)
-        self.origin_en: tuple[float, float] = (float(e), float(n))
+        e, n, _ = _transform(self._from_wgs84, [lon0], [lat0], [h0])
+        self.origin_en: tuple[float, float] = (float(e[0]), float(n[0]))
 
     def to_llh(self, xy, h) -> np.ndarray:
         """xy: (n, 2) plan metres, h: (n,) ellipsoidal heights -> (n, 3) WGS84 lat, lon (deg), height."""
         p = _xy(xy)
         en = plan_to_crs(p, self.site)
-        lon, lat, hw = self._to_wgs84.transform(en[:, 0], en[:, 1], _per_point(h, len(p)))
-        return np.stack([np.asarray(lat, dtype=np.float64), lon, hw], axis=1)
+        lon, lat, hw = _transform(self._to_wgs84, en[:, 0], en[:, 1], _per_point(h, len(p)))
+        return np.stack([lat, lon, hw], axis=1)
 
     def llh_to_enu(self, lat, lon, h) -> np.ndarray:
         """WGS84 lat, lon (deg), ellipsoidal h, each (n,) -> (n, 3) float64 topocentric ENU."""
-        e, n, u = self._topocentric.transform(
-            np.asarray(lon, dtype=np.float64), np.asarray(lat, dtype=np.float64), np.asarray(h, dtype=np.float64)
-        )
-        return np.stack([np.atleast_1d(e), np.atleast_1d(n), np.atleast_1d(u)], axis=1)
+        lon = np.asarray(lon, dtype=np.float64).reshape(-1)
+        return np.stack(_transform(self._topocentric, lon, lat, _per_point(h, len(lon))), axis=1)
 
     def to_enu(self, xy, h) -> np.ndarray:
         """xy: (n, 2) plan metres, h: (n,) ellipsoidal heights -> (n, 3) float64 ENU metres."""

@@ -191,7 +191,32 @@ def bad_files():
     save("nan")
 
 
+def visibility():
+    reset()
+    mesh("shown")
+    hidden = mesh("hidden", location=(2, 0, 0))
+    hidden.modifiers.new("sub", "SUBSURF").levels = 1
+    hidden.hide_viewport = True
+    shelf = bpy.data.collections.new("shelf")
+    bpy.context.scene.collection.children.link(shelf)
+    shelf.hide_viewport = True
+    mesh("on_shelf", location=(4, 0, 0))
+    bpy.context.scene.collection.objects.unlink(bpy.data.objects["on_shelf"])
+    shelf.objects.link(bpy.data.objects["on_shelf"])
+    old = bpy.data.collections.new("old")
+    bpy.context.scene.collection.children.link(old)
+    old.objects.link(mesh("excluded", location=(6, 0, 0)))
+    bpy.context.scene.collection.objects.unlink(bpy.data.objects["excluded"])
+    bpy.context.view_layer.layer_collection.children["old"].exclude = True
+    save("visibility")
+
+    reset()
+    empty("lonely", "fixed", (0, 0, 0))
+    save("no_geometry")
+
+
 full()
+visibility()
 shape_with_modifier()
 hostile()
 bad_files()

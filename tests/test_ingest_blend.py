@@ -236,6 +236,16 @@ def test_shape_keys_through_modifiers(fx):
 
 @pytest.mark.blender
 @blender
+def test_view_layer_objects_hidden_ones_included(fx):
+    asset = read_blend_path(fx / "visibility.blend", "v", "test")
+    counts = {v.name: v.mesh.triangle_count for _, v in asset.visuals()}
+    # Hidden objects are evaluated like visible ones (the subsurf applies); an
+    # excluded collection is not part of the asset.
+    assert counts == {"hidden": 48, "on_shelf": 12, "shown": 12}
+
+
+@pytest.mark.blender
+@blender
 def test_mass_is_split_and_deterministic(fx, full):
     assert sum(link.mass for link in full.links) == pytest.approx(50.0)
     assert all(link.mass > 0 for link in full.links)
@@ -313,6 +323,7 @@ def test_missing_and_foreign_files(tmp_path):
         ("empty_mesh", "nothing", "no faces"),
         ("orphan_collision", "hinge_collision", "no visual geometry"),
         ("nan", "bad_points", "NaN"),
+        ("no_geometry", None, "no mesh objects"),
     ],
 )
 def test_bad_input_names_file_and_object(fx, name, obj, words):

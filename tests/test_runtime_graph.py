@@ -174,3 +174,14 @@ def test_render_mapping_follows_the_binding():
     (vs,) = nodes.visual_states({"reactor": {"oil": 10.0}}, [ob])
     assert vs.material == "red"
     assert nodes.unbound_inputs(["reactor.oil", "reactor.oli", "other.oil"], [ob]) == ["other.oil", "reactor.oli"]
+
+
+def test_oil_leak_sun_is_at_the_sample_site_origin():
+    site = ROOT / "sources" / "site.toml"
+    if not site.is_file():
+        pytest.skip("no sources/site.toml")
+    from pipeline.config import read_toml
+
+    origin = read_toml(site)["origin"]
+    sun = graph.Graph(graph.load_scenario(OIL_LEAK)).nodes["sun"]
+    assert (sun.lat, sun.lon) == (origin["lat"], origin["lon"])

@@ -10,7 +10,9 @@ Blender's simple-expression drivers (no Python at all) still work. Muted drivers
 listed in the asset's metadata (`notes`).
 
 What becomes what:
-- geometry objects (mesh, curve, surface, text) are evaluated through the viewport
+- the asset is the objects of the view layer (hidden ones included, excluded
+  collections not); geometry objects (mesh, curve, surface, text) are evaluated
+  through the viewport
   depsgraph (modifiers applied, as the modeller sees them and as the sample's digest
   hashes them) and triangulated with `loop_triangles`;
 - an object with `collision = true` is an `ir.Collision`, any other an `ir.Visual`
@@ -253,8 +255,10 @@ class _Scene:
 def _read_scene(path: Path) -> _Scene:
     import bpy
 
+    objects = _asset_objects(bpy)
+    if not any(ob.type in GEOMETRY_TYPES for ob in objects):
+        raise UserError(path, None, "the scene holds no mesh objects")
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    objects = sorted(bpy.context.scene.objects, key=lambda o: o.name)
     scene = _Scene()
 
     for ob in objects:
@@ -283,6 +287,20 @@ def _read_scene(path: Path) -> _Scene:
         if material_name not in scene.materials:
             scene.materials[material_name] = _material(bpy, path, material_name)
     return scene
+
+
+def _asset_objects(bpy) -> list:
+    """The objects of the view layer, sorted by name. Objects only hidden in the
+    viewport (a collision box a modeller hid, a disabled collection) are part of the
+    asset: they are un-hidden here so the depsgraph evaluates their modifiers too.
+    Objects outside the view layer (an excluded collection, an unlinked object) are
+    not part of it."""
+    for collection in bpy.data.collections:
+        collection.hide_viewport = False
+    objects = sorted(bpy.context.view_layer.objects, key=lambda o: o.name)
+    for ob in objects:
+        ob.hide_viewport = False
+    return objects
 
 
 def _link_of(ob) -> str:

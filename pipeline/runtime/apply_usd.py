@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..export import names
+from .nodes import delta_matrix
 
 SUN_PATH = f"{names.SCENE_ROOT}/Sun"
 
@@ -46,7 +47,9 @@ def write(run, scene_usda: Path, out_path: Path) -> dict:
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdSkel, Vt
     out_path = Path(out_path)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    layer = Sdf.Layer.CreateAnonymous(".usda")
+    # Author in a file beside the target so the relative sublayer path resolves.
+    tmp = out_path.with_name(out_path.name + ".tmp.usda")
+    layer = Sdf.Layer.CreateNew(str(tmp))
     layer.subLayerPaths.append(os.path.relpath(Path(scene_usda).resolve(), out_path.parent.resolve()).replace(os.sep, "/"))
     stage = Usd.Stage.Open(layer)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -96,8 +99,6 @@ def write(run, scene_usda: Path, out_path: Path) -> dict:
                         a = np.asarray(axis, float) / (np.linalg.norm(axis) or 1.0)
                         op.Set(Gf.Vec3d(*(a * y)), k)
                     else:
-                        from .nodes import delta_matrix
-
                         op.Set(Gf.Matrix4d(delta_matrix("scale", axis, y).T.tolist()), k)
                     samples += 1
                 elif effect == "shape":
@@ -145,7 +146,6 @@ def write(run, scene_usda: Path, out_path: Path) -> dict:
                 orient.Set(q if orient.GetPrecision() == UsdGeom.XformOp.PrecisionDouble else Gf.Quatf(q), k)
                 intensity.Set(float(irr) * run.sun_intensity_scale, k)
                 sun_samples += 1
-    tmp = out_path.with_name(out_path.name + ".tmp.usda")
-    layer.Export(str(tmp))
+    layer.Save()
     os.replace(tmp, out_path)
     return {"file": str(out_path), "visual_samples": samples, "sun_samples": sun_samples, "not_applied": skipped}

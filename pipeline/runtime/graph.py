@@ -209,6 +209,14 @@ class Engine:
         self._forced: set[str] = set()
         # Per node, (input port, source key) pairs, resolved once.
         self._reads = {n: [(e.dst[1], e.src) for e in graph.feeds[n]] for n in graph.nodes}
+        self._pos = {n: i for i, n in enumerate(graph.order)}
+        self._readers: dict[tuple[str, str], list[int]] = {}  # output -> positions reading it
+        for e in graph.edges:
+            self._readers.setdefault(e.src, []).append(self._pos[e.dst[0]])
+        self._by_period: dict[int, list[int]] = {}
+        for n, p in graph.period_steps.items():
+            if p is not None:
+                self._by_period.setdefault(p, []).append(self._pos[n])
 
     @property
     def t(self) -> float:
@@ -225,16 +233,23 @@ class Engine:
     def step(self) -> StepReport:
         self.k += 1
         k, t = self.k, self.t
-        changed: set[tuple[str, str]] = set()
-        ran = []
         g = self.graph
-        for n in g.order:
-            reads = self._reads[n]
-            period = g.period_steps[n]
-            due = k == 0 or n in self._forced or (period is not None and k % period == 0)
-            if not due and not any(src in changed for _, src in reads):
-                continue
-            inputs = {port: self.values[src] for port, src in reads if src in self.values}
+        # Visit only what can run: due and forced nodes, then consumers of changed
+        # outputs, in schedule order (a heap of schedule positions): the cost of an
+        # incremental step follows the affected subgraph, not the graph's size.
+        if k == 0:
+            todo = list(range(len(g.order)))
+        else:
+            todo = [self._pos[n] for n in self._forced]
+            for period, members in self._by_period.items():
+                if k % period == 0:
+                    todo += members
+        heapq.heapify(todo)
+        queued = set(todo)
+        ran = []
+        while todo:
+            n = g.order[heapq.heappop(todo)]
+            inputs = {port: self.values[src] for port, src in self._reads[n] if src in self.values}
             try:
                 out = g.nodes[n].step(t, inputs)
             except ValueError as e:
@@ -243,8 +258,11 @@ class Engine:
             for port, value in out.items():
                 key = (n, port)
                 if key not in self.values or self.values[key] != value:
-                    changed.add(key)
                     self.values[key] = value
+                    for i in self._readers.get(key, ()):
+                        if i not in queued:
+                            queued.add(i)
+                            heapq.heappush(todo, i)
         self._forced.clear()
         return StepReport(k, t, tuple(ran))
 

@@ -15,7 +15,8 @@ y across it; sizes from ASSETS.md, spacing from real phase clearances):
   the lower terrace, lifted to the slope's height at their centre).
 
 The output is byte-deterministic: ezdxf's creation/update dates, GUIDs and version
-stamps are fixed, handles are sequential, and every number is computed, not random.
+stamps are fixed, the CLASSES section is sorted (ezdxf fills it from a set), handles
+are sequential, and every number is computed, not random.
 
     .venv/bin/python sources/authoring/floorplan.py [--out PATH]
 
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -337,10 +339,20 @@ def write(plan: Plan, out: Path) -> None:
             for k, (name, value) in enumerate(attrs.items()):
                 ref.add_attrib(name, value, (item.x, item.y - 0.3 * k), dxfattribs={"height": 0.25})
         annotate(msp)
+        fix_class_order(doc)
         out.parent.mkdir(parents=True, exist_ok=True)
         doc.saveas(out)
     finally:
         ezdxf.options.write_fixed_meta_data_for_testing = previous
+
+
+def fix_class_order(doc) -> None:
+    """ezdxf registers the CLASSES of the entity types in use by iterating a set, whose
+    order changes with Python's hash seed: register them now and sort the new ones."""
+    before = list(doc.classes.classes)
+    doc.classes.add_required_classes(doc.dxfversion)
+    added = sorted(k for k in doc.classes.classes if k not in before)
+    doc.classes.classes = OrderedDict((k, doc.classes.classes[k]) for k in before + added)
 
 
 def annotate(msp) -> None:
