@@ -186,8 +186,8 @@ def test_millimetre_plan_georeferences_like_a_metre_plan(sample_site, tmp_path):
     assert np.abs(pm - pmm).max() < 1e-9 and np.abs(ym - ymm).max() < 1e-12
     # height = level elevation + INSERT z
     en = plan_to_crs([[187.345, 93.125]], sample_site)
-    lon, lat = Transformer.from_crs("EPSG:31984", "EPSG:4326", always_xy=True).transform(en[:, 0], en[:, 1])
-    assert np.abs(pm - reference_enu(lat, lon, np.array([53.0]), sample_site.origin)).max() < 1e-6
+    lon, lat = Transformer.from_crs("EPSG:31984", "EPSG:4326", always_xy=True).transform(en[0, 0], en[0, 1])
+    assert np.abs(pm - reference_enu(np.array([lat]), np.array([lon]), np.array([53.0]), sample_site.origin)).max() < 1e-6
 
 
 def test_default_origin_is_the_platform_centre(sample_site):
