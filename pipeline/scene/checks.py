@@ -1,7 +1,7 @@
 """Placement checks with stable codes (DESIGN.md s.7, the placement group).
 
 PLACE001 unknown asset          PLACE002 duplicate TAG
-PLACE003 outside every platform of its level
+PLACE003 outside every platform of its level (warning: on a slope)
 PLACE004 footprints overlap beyond tolerance
 PLACE005 base not on the terrain (over 1 cm)
 Each finding is a dict {code, severity, site, message}, sorted for stable reports.
@@ -74,15 +74,21 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
     platforms: dict[str, list[np.ndarray]] = {}
     for pf in fp.platforms:
         platforms.setdefault(pf.level, []).append(np.asarray(pf.outline))
+    on_platform = []
     for pl in placed:
         p = pl.placement
-        if not any(point_in_polygon(np.array([p.x, p.y]), poly) for poly in platforms.get(p.level, [])):
-            out.append(finding("PLACE003", "error", p.tag,
-                               f"at plan ({p.x:.3f}, {p.y:.3f}) outside every PLATFORM_{p.level} outline"))
+        inside = any(point_in_polygon(np.array([p.x, p.y]), poly) for poly in platforms.get(p.level, []))
+        on_platform.append(inside)
+        if not inside:
+            out.append(finding("PLACE003", "warning", p.tag,
+                               f"at plan ({p.x:.3f}, {p.y:.3f}) outside every PLATFORM_{p.level} outline"
+                               f" (standing {p.z:.3f} m above {p.level} on the slope or ground)"))
 
-    for pl, tz in zip(placed, terrain_z):
+    for pl, tz, inside in zip(placed, terrain_z, on_platform):
         p = pl.placement
-        base = pl.pose[2, 3] - p.z
+        # On its platform, INSERT z is a plinth or support height: the foot is at the
+        # level. Off the platform (on a slope) INSERT z lifts the foot onto the terrain.
+        base = pl.pose[2, 3] - p.z if inside else pl.pose[2, 3]
         if not np.isfinite(tz):
             out.append(finding("PLACE005", "error", p.tag, "no terrain under the placement"))
         elif abs(base - tz) > BASE_TOLERANCE_M:
