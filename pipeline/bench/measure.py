@@ -1,7 +1,7 @@
 """Run one command and measure its wall time and peak memory.
 
-`python -m pipeline.bench.measure LOG -- CMD...` runs CMD with its output in LOG and
-prints one JSON line: {seconds, returncode, maxrss_bytes, tree_peak_bytes}.
+`python -m pipeline.bench.measure LOG -- CMD...` runs CMD with its stdout in LOG.out and
+its stderr in LOG.err, and prints one JSON line: {seconds, returncode, maxrss_bytes, tree_peak_bytes}.
 
 - maxrss_bytes: resource.getrusage(RUSAGE_CHILDREN).ru_maxrss of this wrapper once CMD
   has exited, i.e. the peak RSS of the largest single process in CMD's tree (the
@@ -60,9 +60,10 @@ def tree_rss(pid: int) -> int:
 
 def measure(cmd: list[str], log: Path, env: dict | None = None, cwd: str | None = None) -> dict:
     peak = [0]
-    with open(log, "ab") as out:
+    log = Path(log)
+    with open(f"{log}.out", "ab") as out, open(f"{log}.err", "ab") as err:
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=env, cwd=cwd)
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, env=env, cwd=cwd)
         done = threading.Event()
 
         def sample():

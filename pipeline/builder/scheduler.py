@@ -121,12 +121,20 @@ class Scheduler:
         meta = self.cache.restore(key, self.build)
         keep = set(meta["files"])
         for out in task.outputs:
-            folder = self.build / out
-            if out.endswith("/") and folder.is_dir():
-                for p in sorted(folder.rglob("*")):
+            # a folder output ("x/") or a family of folders ("x__lod*"): the task owns
+            # every file in them, so what its new run did not make goes
+            folders = sorted(self.build.glob(out)) if out.endswith("*") else [self.build / out]
+            for folder in folders:
+                if not folder.is_dir():
+                    continue
+                for p in sorted(folder.rglob("*"), reverse=True):
                     rel = str(p.relative_to(self.build))
                     if p.is_file() and rel not in keep:
                         p.unlink()
+                    elif p.is_dir() and not any(p.iterdir()):
+                        p.rmdir()
+                if not any(folder.iterdir()):
+                    folder.rmdir()
         return meta
 
     # --- run --------------------------------------------------------------------

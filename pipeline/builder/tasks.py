@@ -164,7 +164,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
             inputs=(cfg.path.resolve(), cfg.source.resolve()),
             params={"asset": asset_id},
             code=asset_code,
-            outputs=(f"models/{asset_id}/",),
+            outputs=(f"models/{asset_id}/", f"models/{asset_id}__lod*"),
             needs_blender=cfg.source.suffix.lower() == ".blend",
         ))
     if not only:

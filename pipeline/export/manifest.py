@@ -31,6 +31,15 @@ def _bounds(asset: ir.Asset) -> list[list[float]]:
     return [pts.min(axis=0).tolist(), pts.max(axis=0).tolist()]
 
 
+def _lods(asset: ir.Asset) -> list[dict]:
+    """The LOD table; level 0 (the authored meshes) is always first."""
+    infos = list(asset.lods)
+    if not infos or infos[0].level != 0:
+        infos.insert(0, ir.LodInfo(0, 0.0, 0.0, asset.triangle_count(0)))
+    return [{"level": i.level, "budget_m": i.budget_m, "error_m": i.error_m, "triangles": i.triangles,
+             "within_budget": bool(i.error_m <= i.budget_m)} for i in infos]
+
+
 def content(asset: ir.Asset, *, source: dict, outputs: dict[str, str], lod_models: list[str]) -> dict:
     """The manifest as plain data. `outputs`: package-relative path -> sha256."""
     visual_of = {v.name: (link.name, v) for link, v in asset.visuals()}
@@ -59,11 +68,7 @@ def content(asset: ir.Asset, *, source: dict, outputs: dict[str, str], lod_model
         "source": source,
         "outputs": dict(sorted(outputs.items())),
         "lod_models": lod_models,
-        "lods": [
-            {"level": 0, "budget_m": 0.0, "error_m": 0.0, "triangles": asset.triangle_count(0), "within_budget": True},
-            *[{"level": i.level, "budget_m": i.budget_m, "error_m": i.error_m, "triangles": i.triangles,
-               "within_budget": bool(i.error_m <= i.budget_m)} for i in asset.lods],
-        ],
+        "lods": _lods(asset),
         "bounds": _bounds(asset),
         "links": [
             {"name": link.name, "pose": _matrix(link.pose), "mass": link.mass,

@@ -6,7 +6,8 @@ surface with probability proportional to area (fixed seed: the same meshes alway
 give the same number). For each query point the distance to B's *surface* is exact
 point-triangle distance (Ericson's closest-point regions) to candidate triangles: the
 triangles owning the `candidates` nearest of B's face centroids and area-weighted
-samples (a cKDTree), plus the three edge neighbours of the best of them. Each per-point value is therefore >= the true distance of that
+samples (a cKDTree), then a greedy walk from the best of them across edge neighbours
+while the distance decreases (slivers: the nearest sample may sit on a neighbour). Each per-point value is therefore >= the true distance of that
 point (it is the exact distance to some triangle of B), and equal to it whenever the
 nearest triangle is among the candidates (almost always: B's sample spacing h_B is
 far below the distances that matter). The maximum over query points can miss a peak
@@ -146,11 +147,12 @@ class SurfaceDistance:
         d = point_triangle_distance(pp, self.vertices[t[:, 0]], self.vertices[t[:, 1]], self.vertices[t[:, 2]])
         return d.reshape(len(p), c)
 
-    def nearest_faces(self, points: np.ndarray, chunk: int = 200_000) -> tuple[np.ndarray, np.ndarray]:
+    def nearest_faces(self, points: np.ndarray, chunk: int = 200_000, walk: int = 16) -> tuple[np.ndarray, np.ndarray]:
         """Candidate faces (k, c) int64 of `points: (k, 3)` and their exact distances
-        (k, c): the owners of the nearest index points plus the best one's edge
-        neighbours (they catch the triangle that really holds the closest point when
-        a neighbour's sample happened to be nearer)."""
+        (k, c): the owners of the nearest index points, then a greedy walk across edge
+        neighbours while that gets closer (at most `walk` steps). The walk finds the
+        triangle really holding the closest point when the nearest samples sit on
+        neighbouring slivers; the last column holds the walk's best face."""
         points = np.asarray(points, dtype=np.float64) - self.origin
         kk = min(self.candidates, len(self.points))
         cands, dists = [], []
@@ -159,13 +161,26 @@ class SurfaceDistance:
             _, idx = self.tree.query(p, k=kk, workers=-1)
             cand = self.owner[idx.reshape(len(p), kk)]
             d = self._distances(p, cand)
-            best = cand[np.arange(len(p)), d.argmin(axis=1)]
-            ring = self.neighbours[best]
-            ring = np.where(ring >= 0, ring, best[:, None])
-            cands.append(np.concatenate([cand, ring], axis=1))
-            dists.append(np.concatenate([d, self._distances(p, ring)], axis=1))
+            rows = np.arange(len(p))
+            best = cand[rows, d.argmin(axis=1)]
+            best_d = d.min(axis=1)
+            active = rows
+            for _ in range(walk):
+                ring = self.neighbours[best[active]]
+                ring = np.where(ring >= 0, ring, best[active][:, None])
+                rd = self._distances(p[active], ring)
+                j = rd.argmin(axis=1)
+                new_d = rd[np.arange(len(active)), j]
+                better = new_d < best_d[active] * (1.0 - 1e-12)
+                best[active[better]] = ring[better, j[better]]
+                best_d[active[better]] = new_d[better]
+                active = active[better]
+                if len(active) == 0:
+                    break
+            cands.append(np.concatenate([cand, best[:, None]], axis=1))
+            dists.append(np.concatenate([d, best_d[:, None]], axis=1))
         if not cands:
-            return np.zeros((0, kk + 3), dtype=np.int64), np.zeros((0, kk + 3))
+            return np.zeros((0, kk + 1), dtype=np.int64), np.zeros((0, kk + 1))
         return np.concatenate(cands), np.concatenate(dists)
 
     def __call__(self, points: np.ndarray) -> np.ndarray:

@@ -1,30 +1,57 @@
 """The OpenUSD scene: /Site (kind assembly) with one instanceable reference per
-placement, the LOD picked by variant selection, the terrain, and a DistantLight sun."""
+placement, the LOD picked by variant selection, the terrain, and a DistantLight sun.
+
+Authored with the Sdf layer API, not through a stage: nothing is composed while
+writing (hundreds of references would be opened for nothing), and references are
+written relative to the scene file's final place, build/scene/.
+"""
 
 from __future__ import annotations
 
 import os
+import uuid
 from pathlib import Path
 
 import numpy as np
 
-from ..export.names import SCENE_ROOT, scene_placement_path, usd_file
+from ..export.names import safe_name, usd_file
 from .placements import Placed
 
+MODELS_FROM_SCENE = "../models"  # build/scene/ -> build/models/
 
-def _rel(target: Path, start: Path) -> str:
-    return "./" + os.path.relpath(target, start).replace(os.sep, "/")
+
+def _reference(model: str) -> str:
+    return f"{MODELS_FROM_SCENE}/{model}/{usd_file(model)}"
+
+
+def _attr(prim, name: str, type_name, value, uniform: bool = False):
+    from pxr import Sdf
+
+    variability = Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying
+    spec = Sdf.AttributeSpec(prim, name, type_name, variability)
+    spec.default = value
+    return spec
+
+
+def sun_orientation(elevation_deg: float, azimuth_deg: float):
+    """Quaternion turning a DistantLight's -Z (its shining direction) onto the
+    sunlight's direction in ENU (azimuth clockwise from north)."""
+    from pxr import Gf
+
+    el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+    to_sun = Gf.Vec3d(np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el))
+    return Gf.Quatd(Gf.Rotation(Gf.Vec3d(0, 0, 1), to_sun).GetQuat())
 
 
 def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, placed: list[Placed],
           terrain_model: str, sun: dict) -> None:
-    from pxr import Gf, Kind, Sdf, Usd, UsdGeom, UsdLux
+    from pxr import Gf, Sdf, Vt
 
     path = Path(path)
     layer = Sdf.Layer.CreateAnonymous(".usda")
-    stage = Usd.Stage.Open(layer)
-    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
-    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    layer.pseudoRoot.SetInfo("metersPerUnit", 1.0)
+    layer.pseudoRoot.SetInfo("upAxis", "Z")
+    layer.defaultPrim = "Site"
     layer.customLayerData = {
         "site": site_name,
         "crs": crs,
@@ -32,43 +59,35 @@ def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, pla
         "geodetic_origin": {"latitude_deg": float(origin_llh[0]), "longitude_deg": float(origin_llh[1]),
                             "height_m": float(origin_llh[2])},
     }
-    site = UsdGeom.Xform.Define(stage, SCENE_ROOT)
-    Usd.ModelAPI(site).SetKind(Kind.Tokens.assembly)
-    stage.SetDefaultPrim(site.GetPrim())
-    UsdGeom.Scope.Define(stage, f"{SCENE_ROOT}/Placements")
+    site = Sdf.PrimSpec(layer, "Site", Sdf.SpecifierDef, "Xform")
+    site.SetInfo("kind", "assembly")
+    scope = Sdf.PrimSpec(site, "Placements", Sdf.SpecifierDef, "Scope")
 
-    terrain = UsdGeom.Xform.Define(stage, f"{SCENE_ROOT}/Terrain")
-    terrain.GetPrim().GetReferences().AddReference(_rel(models / terrain_model / usd_file(terrain_model), path.parent))
+    terrain = Sdf.PrimSpec(site, "Terrain", Sdf.SpecifierDef, "Xform")
+    terrain.referenceList.Prepend(Sdf.Reference(_reference(terrain_model)))
 
+    op_order = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
     for pl in sorted(placed, key=lambda p: p.placement.tag):
-        prim_path = scene_placement_path(pl.placement.tag)
-        xf = UsdGeom.Xform.Define(stage, prim_path)
-        prim = xf.GetPrim()
-        asset_id = pl.placement.asset_id
-        prim.GetReferences().AddReference(_rel(models / asset_id / usd_file(asset_id), path.parent))
+        p = pl.placement
+        prim = Sdf.PrimSpec(scope, safe_name(p.tag), Sdf.SpecifierDef, "Xform")
+        prim.referenceList.Prepend(Sdf.Reference(_reference(p.asset_id)))
+        prim.variantSelections["lod"] = f"lod{pl.lod}"
+        prim.instanceable = True
         x, y, z = (float(v) for v in pl.pose[:3, 3])
-        xf.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(x, y, z))
-        xf.AddRotateZOp(UsdGeom.XformOp.PrecisionDouble).Set(float(np.degrees(pl.yaw)))
-        vsets = prim.GetVariantSets()
-        if "lod" in vsets.GetNames():
-            vsets.GetVariantSet("lod").SetVariantSelection(f"lod{pl.lod}")
-        prim.SetInstanceable(True)
-        prim.SetCustomDataByKey("tag", pl.placement.tag)
-        prim.SetCustomDataByKey("asset", asset_id)
-        prim.SetCustomDataByKey("level", pl.placement.level)
-        if pl.placement.state:
-            prim.SetCustomDataByKey("state", pl.placement.state)
+        _attr(prim, "xformOp:translate", Sdf.ValueTypeNames.Double3, Gf.Vec3d(x, y, z))
+        _attr(prim, "xformOp:rotateZ", Sdf.ValueTypeNames.Double, float(np.degrees(pl.yaw)))
+        _attr(prim, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, op_order, uniform=True)
+        data = {"tag": p.tag, "asset": p.asset_id, "level": p.level}
+        if p.state:
+            data["state"] = p.state
+        prim.customData = data
 
-    light = UsdLux.DistantLight.Define(stage, f"{SCENE_ROOT}/Sun")
-    light.CreateIntensityAttr(float(sun["intensity"]))
-    light.CreateAngleAttr(0.53)
-    # DistantLight shines along its local -Z: aim -Z at the sunlight's direction.
-    el, az = sun["elevation_deg"], sun["azimuth_deg"]
-    to_sun = Gf.Vec3d(np.sin(np.radians(az)) * np.cos(np.radians(el)),
-                      np.cos(np.radians(az)) * np.cos(np.radians(el)), np.sin(np.radians(el)))
-    rot = Gf.Rotation(Gf.Vec3d(0, 0, 1), to_sun)
-    xf = UsdGeom.Xformable(light)
-    xf.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(rot.GetQuat()))
-    tmp = path.with_name(path.name + ".tmp.usda")
+    light = Sdf.PrimSpec(site, "Sun", Sdf.SpecifierDef, "DistantLight")
+    _attr(light, "inputs:intensity", Sdf.ValueTypeNames.Float, float(sun["intensity"]))
+    _attr(light, "inputs:angle", Sdf.ValueTypeNames.Float, 0.53)
+    _attr(light, "xformOp:orient", Sdf.ValueTypeNames.Quatd, sun_orientation(sun["elevation_deg"], sun["azimuth_deg"]))
+    _attr(light, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(["xformOp:orient"]), uniform=True)
+
+    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.usda")
     layer.Export(str(tmp))
     os.replace(tmp, path)

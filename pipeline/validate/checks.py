@@ -411,6 +411,8 @@ def check_asset(asset: ir.Asset, budget_triangles: int | None = None) -> list[Fi
 
 _LOD_VARIANT = re.compile(r"^(?P<base>.+)__lod\d+$")
 _HASH_CHUNK = 1 << 20
+_PROLOG_BYTES = 1 << 16
+_DOCTYPE = re.compile(rb"<!DOCTYPE", re.IGNORECASE)
 
 
 def hardened_parser() -> etree.XMLParser:
@@ -423,11 +425,20 @@ def parse_xml(path: Path, site: str) -> tuple[etree._ElementTree | None, list[Fi
     """Parse with the hardened parser; any DOCTYPE is refused (COLLADA and SDF need none,
     so one can only be there to declare entities)."""
     try:
+        with open(path, "rb") as f:
+            head = f.read(_PROLOG_BYTES)
+    except OSError as e:
+        return None, [finding("PKG002", site, f"cannot read: {e.strerror}")]
+    # Refuse before libxml2 sees it: it would still read the entity declarations.
+    if _DOCTYPE.search(head):
+        return None, [finding("PKG005", site, "declares a DOCTYPE; refused, entities not resolved")]
+    try:
         tree = etree.parse(str(path), hardened_parser())
     except etree.XMLSyntaxError as e:
-        return None, [finding("PKG001", site, f"not well-formed XML: {e}")]
+        # e.msg, not str(e): the latter names the absolute path, which differs per checkout
+        return None, [finding("PKG001", site, f"not well-formed XML: {e.msg} (line {e.lineno})")]
     except OSError as e:
-        return None, [finding("PKG002", site, f"cannot read: {e}")]
+        return None, [finding("PKG002", site, f"cannot read: {e.strerror}")]
     info = tree.docinfo
     if info.doctype or info.internalDTD is not None or info.externalDTD is not None:
         return None, [finding("PKG005", site, f"declares DOCTYPE {info.doctype!r}; refused, entities not resolved")]

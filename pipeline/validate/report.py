@@ -81,9 +81,12 @@ def _joint_rows(manifest: dict) -> list[dict]:
 
 
 def _lod_rows(manifest: dict) -> list[dict]:
-    rows = []
+    rows, seen = [], set()
     for lod in manifest.get("lods", []):
-        if isinstance(lod, dict):
+        # the manifest writes LOD0 itself; an asset whose lods also name level 0
+        # would show it twice
+        if isinstance(lod, dict) and int(lod.get("level", 0)) not in seen:
+            seen.add(int(lod.get("level", 0)))
             rows.append({"level": int(lod.get("level", 0)), "triangles": int(lod.get("triangles", 0)),
                          "error_m": float(lod.get("error_m", 0.0)), "budget_m": float(lod.get("budget_m", 0.0)),
                          "within_budget": bool(lod.get("within_budget", True))})

@@ -1,0 +1,97 @@
+"""Peer (a): Blender's own exporters writing the whole scene as one file, against our
+modular scene; and Blender's re-export per state step (the study's runtime).
+
+Every Blender run is a fresh subprocess (pipeline.bench.blender_script): bpy's
+state, memory and import cost stay out of the bench process, and each load starts
+from an empty Blender like a user opening the file.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from .context import Context
+from .stats import summarize, summarize_values
+
+
+def _blender(*args: str, timeout: float = 1200.0) -> dict:
+    cmd = [sys.executable, "-m", "pipeline.bench.blender_script", *args]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    for line in reversed(proc.stdout.splitlines()):
+        if line.startswith("BENCH_JSON "):
+            return json.loads(line[len("BENCH_JSON "):])
+    raise RuntimeError(f"blender_script {args[0]} exited {proc.returncode}: {(proc.stderr or proc.stdout)[-500:]}")
+
+
+def _loads(files: dict[str, Path], repeats: int) -> dict:
+    """Fresh-process load of each file, repeats interleaved so drift hits all alike."""
+    runs: dict[str, list[dict]] = {k: [] for k in files}
+    for _ in range(repeats):
+        for label, path in files.items():
+            runs[label].append(_blender("load", str(path)))
+    out = {}
+    for label, rs in runs.items():
+        out[label] = {"file": str(files[label]), "time": summarize([r["seconds"] for r in rs]),
+                      "maxrss": summarize_values([r["maxrss_bytes"] for r in rs], "bytes"),
+                      "objects": rs[-1]["objects"], "meshes": rs[-1]["meshes"]}
+        if files[label] != Path("none"):
+            out[label]["bytes"] = _size(files[label])
+    return out
+
+
+def _size(path: Path) -> int:
+    """A file's size; for a USD stage, the stage plus every layer it references."""
+    path = Path(path)
+    if path.suffix not in (".usda", ".usd", ".usdc"):
+        return path.stat().st_size
+    try:
+        from pxr import Sdf, UsdUtils
+
+        layers, assets, _ = UsdUtils.ComputeAllDependencies(Sdf.AssetPath(str(path)))
+        return sum(Path(layer.realPath).stat().st_size for layer in layers if layer.realPath)
+    except Exception:  # usd-core missing or an odd layer: the stage file alone
+        return path.stat().st_size
+
+
+def blender_section(ctx: Context) -> dict:
+    built = ctx.built
+    if built is None:
+        raise RuntimeError("no built sample (the build section failed)")
+    work = ctx.work / "blender"
+    repeats = ctx.pick(1, 2)
+    a = _blender("assemble", str(built), str(work), str(repeats))
+    ctx.shared["blender_glb"] = a["glb"]
+    ours = {p.suffix: p for p in sorted((built / "scene").iterdir()) if p.suffix in (".glb", ".usda")}
+    files = {"empty (bpy baseline)": Path("none"), "blender_monolithic.glb": Path(a["glb"]),
+             "blender_monolithic.usdc": Path(a["usd"])}
+    for suffix, p in ours.items():
+        files[f"ours:{p.name}"] = p
+    data = {
+        "blender": a["blender"], "placements": a["placements"], "objects": a["objects"], "meshes": a["meshes"],
+        "assemble_s": a["assemble_s"],
+        "export_gltf": summarize(a["export_gltf_s"]), "export_usd": summarize(a["export_usd_s"]),
+        "blender_glb_bytes": a["glb_bytes"], "blender_usd_bytes": a["usd_bytes"],
+        "ours_bytes": {p.name: _size(p) for p in ours.values()},
+        "loads": _loads(files, ctx.pick(1, 3)),
+    }
+    scene = ctx.shared.get("scene_build")
+    if scene:
+        data["ours_scene_build"] = scene
+    return data
+
+
+def reexport_section(ctx: Context, asset: str | None = None) -> dict:
+    """The study's per-step Blender re-export of one model (the reactor when present)."""
+    built = ctx.built
+    if built is None:
+        raise RuntimeError("no built sample (the build section failed)")
+    if asset is None:
+        models = sorted(p.name for p in (built / "models").iterdir() if (p / f"{p.name}.glb").exists())
+        asset = "shunt_reactor" if "shunt_reactor" in models else models[0]
+    r = _blender("reexport", str(built), asset, str(ctx.work / "reexport"), str(ctx.pick(3, 10)))
+    return {"asset": asset, "objects": r["objects"], "bytes": r["bytes"], "step": summarize(r["step_s"]),
+            "what": "rotate the pointer, recolour its material, export_scene.gltf of the model (GLB); "
+                    "Blender 5 has no COLLADA exporter, which the study used"}

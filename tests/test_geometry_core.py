@@ -1,0 +1,160 @@
+"""clean, transform, metrics, collision, uv: hard cases on small hand-made meshes."""
+
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline import ir
+from pipeline.errors import UserError
+from pipeline.geometry import clean as C
+from pipeline.geometry import collision, metrics, transform as T, uv
+
+
+def box(offset=0.0):
+    b = trimesh.creation.box((1, 2, 3))
+    return np.asarray(b.vertices) + offset, np.asarray(b.faces, dtype=np.int64)
+
+
+def volume(v, f):
+    v = v - v.mean(axis=0)
+    return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6)
+
+
+def test_clean_soup_degenerate_duplicate_and_inward_at_1e7():
+    v, f = box(1e7)
+    soup = v[f[:, ::-1]].reshape(-1, 3)  # inward, unwelded
+    faces = np.arange(len(soup)).reshape(-1, 3)
+    faces = np.concatenate([faces, faces[:2], [[0, 0, 1]], [[0, 1, 1]]])  # duplicates, repeated index
+    m = C.clean_mesh(ir.Mesh(soup, faces))
+    assert len(m.vertices) == 8 and m.triangle_count == 12
+    assert volume(m.vertices, m.faces) == pytest.approx(6.0, rel=1e-9)
+    assert C.non_manifold_edge_count(m.faces) == 0
+
+
+def test_zero_area_face_dropped_and_nan_rejected():
+    v = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], float)
+    m = C.clean_mesh(ir.Mesh(v, [[0, 1, 2], [0, 1, 3]]))
+    assert m.triangle_count == 1
+    v[1, 0] = np.nan
+    with pytest.raises(UserError) as e:
+        C.clean_mesh(ir.Mesh(v, [[0, 1, 3]]), file="a.stl", obj="gauge")
+    assert "a.stl: gauge" in str(e.value)
+
+
+def test_orientation_mixed_components_and_non_manifold_survives():
+    v1, f1 = box()
+    v2, f2 = box(5.0)
+    f2 = f2[:, ::-1]  # second part inward
+    rng = np.random.default_rng(1)
+    f1 = np.where(rng.random(len(f1))[:, None] < 0.5, f1[:, ::-1], f1)  # random winding
+    v = np.concatenate([v1, v2])
+    f = np.concatenate([f1, f2 + len(v1)])
+    out = C.orient_faces(v, f)
+    assert volume(v[:8], out[:12]) > 0 and volume(v[8:], out[12:] - 8) > 0
+    # an extra fin on one edge: non-manifold, kept, no crash
+    fin = np.concatenate([v, [[9.0, 9.0, 9.0]]])
+    e = f[0, :2]
+    out2 = C.clean_mesh(ir.Mesh(fin, np.concatenate([f, [[e[0], e[1], len(fin) - 1]]])))
+    assert C.non_manifold_edge_count(out2.faces) == 1
+
+
+def test_weld_respects_uvs_and_shape_keys():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 0], [1, 1, 0]], float)
+    f = [[0, 1, 2], [3, 4, 1]]
+    uvs = np.array([[0, 0], [1, 0], [0, 1], [0.5, 0.5], [1, 1]])
+    assert len(C.clean_mesh(ir.Mesh(v, f, uvs=uvs)).vertices) == 5  # a UV seam stays split
+    key = v.copy()
+    key[3] += 0.1
+    m = C.clean_mesh(ir.Mesh(v, f, shape_keys=(ir.ShapeKey("k", key),)))
+    assert len(m.vertices) == 5 and len(m.shape_keys[0].vertices) == 5
+    m2 = C.clean_mesh(ir.Mesh(v, f, shape_keys=(ir.ShapeKey("k", v * 2),)))
+    assert len(m2.vertices) == 4
+    np.testing.assert_allclose(m2.shape_keys[0].vertices, m2.vertices * 2)
+
+
+def test_negative_scale_keeps_outward():
+    v, f = box()
+    mirror = np.diag([-1.0, 2.0, 1.0, 1.0])
+    v2, f2 = C.apply_transform(v, f, mirror)
+    assert volume(v2, f2) == pytest.approx(12.0)
+    t, r, s = T.decompose(mirror @ T.xyz_rpy_to_matrix((1, 2, 3), (0.1, 0.2, 0.3)))
+    assert (s < 0).sum() == 1 and np.linalg.det(r) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("pitch", [math.pi / 2, -math.pi / 2, math.pi / 2 - 1e-9, 0.3])
+def test_rpy_round_trip_near_gimbal_lock(pitch):
+    m = T.xyz_rpy_to_matrix((1e7, -2e6, 3.0), (0.7, pitch, -1.1))
+    xyz, rpy = T.matrix_to_xyz_rpy(m)
+    assert np.isfinite(rpy).all()
+    back = T.xyz_rpy_to_matrix(xyz, rpy)
+    assert np.abs(back[:3, :3] - m[:3, :3]).max() < 1e-12 * (1 if abs(abs(pitch) - math.pi / 2) < 1e-15 else 1e4)
+    q = T.quaternion_from_matrix(m)
+    assert np.abs(T.matrix_from_quaternion(q, xyz) - m).max() < 1e-9
+    assert np.allclose(T.compose(m, T.invert_rigid(m)), np.eye(4), atol=1e-6)
+
+
+def test_quaternion_180_degrees():
+    m = T.xyz_rpy_to_matrix(rpy=(math.pi, 0, 0))
+    q = T.quaternion_from_matrix(m)
+    assert np.allclose(np.abs(q), [0, 1, 0, 0], atol=1e-12)
+
+
+def test_point_triangle_distance_matches_trimesh():
+    rng = np.random.default_rng(0)
+    p, a, b, c = (rng.normal(size=(3000, 3)) for _ in range(4))
+    cp = trimesh.triangles.closest_point(np.stack([a, b, c], 1), p)
+    np.testing.assert_allclose(metrics.point_triangle_distance(p, a, b, c), np.linalg.norm(p - cp, axis=1), atol=1e-12)
+
+
+def test_hausdorff_sphere_vs_coarse_and_offset():
+    fine = trimesh.creation.icosphere(subdivisions=5)
+    coarse = trimesh.creation.icosphere(subdivisions=2)
+    expected = 1 - np.linalg.norm(coarse.triangles_center, axis=1).min()  # deepest face centre
+    h = metrics.hausdorff(fine.vertices + 1e7, fine.faces, coarse.vertices + 1e7, coarse.faces, samples=20000)
+    assert expected * 0.97 < h < expected * 1.05
+    assert metrics.hausdorff(fine.vertices, fine.faces, fine.vertices, fine.faces, samples=5000) < 1e-9
+    assert metrics.hausdorff(fine.vertices, fine.faces, fine.vertices, fine.faces[:0]) == math.inf
+
+
+def _asset(*visuals):
+    return ir.Asset("a", "c", (ir.Link("base", visuals=visuals),), source="a.blend")
+
+
+@pytest.mark.parametrize("mode", ["hull_per_link", "hull_per_part", "box"])
+def test_collision_modes_closed_outward(mode):
+    v1, f1 = box()
+    v2, f2 = box(10.0)
+    flat = ir.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])  # planar: hull must not fail
+    a = _asset(ir.Visual("a", "m", (ir.Mesh(np.concatenate([v1, v2]), np.concatenate([f1, f2 + 8])),)),
+               ir.Visual("flat", "m", (flat,), pose=T.xyz_rpy_to_matrix((0, 0, 20))))
+    out = collision.collision_step(collision.CollisionOptions(mode=mode))(a)
+    cols = out.links[0].collisions
+    assert len(cols) == {"hull_per_link": 1, "hull_per_part": 3, "box": 1}[mode]
+    for c in cols:
+        tm = trimesh.Trimesh(c.mesh.vertices, c.mesh.faces, process=False)
+        assert tm.is_watertight and volume(c.mesh.vertices, c.mesh.faces) > 0
+    allv = np.concatenate([c.mesh.vertices for c in cols])
+    assert allv[:, 2].max() >= 20.0 - 1e-9  # the flat visual's pose was applied
+
+
+def test_hull_per_part_caps_count():
+    parts = [box(3.0 * i) for i in range(20)]
+    v = np.concatenate([p[0] for p in parts])
+    f = np.concatenate([p[1] + 8 * i for i, p in enumerate(parts)])
+    out = collision.collision_step(collision.CollisionOptions("hull_per_part", max_parts=16))(_asset(ir.Visual("a", "m", (ir.Mesh(v, f),))))
+    assert len(out.links[0].collisions) == 16
+
+
+def test_uv_rule_and_unwrap():
+    s = trimesh.creation.icosphere(subdivisions=2)
+    a = _asset(ir.Visual("s", "steel", (ir.Mesh(s.vertices, s.faces),)), ir.Visual("t", "paint", (ir.Mesh(s.vertices, s.faces),)))
+    assert uv.uv_step()(a).links[0].visuals[0].mesh.uvs is None
+    out = uv.uv_step(uv.UvOptions(materials=("paint",)))(a)
+    m = out.links[0].visuals[1].mesh
+    assert out.links[0].visuals[0].mesh.uvs is None and m.uvs is not None
+    assert m.uvs.min() >= 0 and m.uvs.max() <= 1 and m.triangle_count == len(s.faces)
+    v, f, uvs, vmap = uv.unwrap(s.vertices, s.faces)
+    np.testing.assert_array_equal(v, s.vertices[vmap])
+    assert volume(v, f) > 0  # winding kept

@@ -1,0 +1,75 @@
+"""Error-bounded LODs: budgets met as measured, no flips, no new non-manifold edges."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from pipeline import ir
+from pipeline.errors import UserError
+from pipeline.geometry import clean as C, lod, metrics
+
+
+def sphere(sub=4, offset=0.0):
+    s = trimesh.creation.icosphere(subdivisions=sub)
+    return np.asarray(s.vertices) * 0.5 + offset, np.asarray(s.faces, dtype=np.int64)
+
+
+@pytest.mark.parametrize("method", lod.METHODS)
+def test_simplify_within_budget_no_flips(method):
+    v, f = sphere(4, offset=1e7)
+    out_v, out_f = lod.simplify(v, f, 0.01, method=method, samples=5000)
+    assert 0 < len(out_f) < len(f) // 2
+    err = metrics.hausdorff(v, f, out_v, out_f, samples=20000)
+    assert err <= 0.01
+    assert C.non_manifold_edge_count(out_f) == 0
+    ref = metrics.SurfaceDistance(v - 1e7, f)
+    assert lod.flipped_face_count(ref, out_v - 1e7, out_f, 0.01) == 0
+
+
+def test_budget_near_zero_and_huge():
+    v, f = sphere(3)
+    same_v, same_f = lod.simplify(v, f, 1e-9, samples=5000)
+    assert len(same_f) == len(f)  # ratio ~1: nothing can be removed
+    tiny_v, tiny_f = lod.simplify(v, f, 10.0, samples=5000)
+    assert 0 < len(tiny_f) <= 40  # ratio ~0: collapses but never vanishes
+
+
+def test_lod_chain_asset():
+    v, f = sphere(4)
+    gv, gf = sphere(2)
+    gauge = ir.Mesh(gv * 0.01, gf)  # 1 cm: under every budget, must stay
+    dial = ir.Mesh(v, f)
+    keyed = ir.Mesh(v, f, shape_keys=(ir.ShapeKey("low", v * 0.9),))
+    asset = ir.Asset("a", "c", (ir.Link("base", visuals=(
+        ir.Visual("body", "m", (dial,)), ir.Visual("gauge", "m", (gauge,)),
+        ir.Visual("needle", "m", (dial,)), ir.Visual("oil", "m", (keyed,)))),),
+        bindings=(ir.StateBinding("oil_level", "rotate", "needle", (0, 1)),), source="x.blend")
+    out = lod.lod_chain(lod.LodOptions(budgets_m=(0.002, 0.01, 0.05), samples=5000))(asset)
+    vis = {v.name: v for _, v in out.visuals()}
+    assert len(vis["body"].lods) == 4
+    tris = [m.triangle_count for m in vis["body"].lods]
+    assert tris == sorted(tris, reverse=True) and tris[-1] < tris[0] // 4
+    assert all(m is dial for m in vis["needle"].lods) and all(m is keyed for m in vis["oil"].lods)
+    assert all(m.triangle_count > 0 for m in vis["gauge"].lods)
+    assert [i.level for i in out.lods] == [0, 1, 2, 3]
+    for info, mesh in zip(out.lods[1:], vis["body"].lods[1:]):
+        assert info.error_m <= info.budget_m
+        assert metrics.hausdorff(v, f, mesh.vertices, mesh.faces, samples=20000) <= info.budget_m
+        assert C.non_manifold_edge_count(mesh.faces) == 0
+    assert out.lods[1].triangles == out.triangle_count(1)
+
+
+def test_lod_refuses_unclean_mesh():
+    v, f = sphere(1)
+    bad = np.concatenate([f, [[0, 0, 1]]])
+    asset = ir.Asset("a", "c", (ir.Link("base", visuals=(ir.Visual("cap", "m", (ir.Mesh(v, bad),)),)),), source="x.blend")
+    with pytest.raises(UserError, match="cap"):
+        lod.lod_chain()(asset)
+
+
+def test_bench_small_runs_every_method_isolated():
+    res = lod.bench_simplifiers({"sphere": sphere(3)}, ratios=(0.1,))
+    assert {r["method"] for r in res["runs"]} == set(lod.METHODS)
+    for r in res["runs"]:
+        assert not r["crashed"], r
+        assert r["triangles"] <= 0.2 * 1280 and r["error_m"] < 0.1

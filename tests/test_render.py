@@ -1,0 +1,116 @@
+"""Renderer: camera geometry and the phone camera model without Blender; frames,
+labels, determinism and the study table with Blender on a built scene (skipped when no
+build is found: set TWIN_RENDER_BUILD to a `twin build` output folder)."""
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.runtime import render as r
+
+BUILD = Path(os.environ.get("TWIN_RENDER_BUILD", "build"))
+needs_build = pytest.mark.skipif(not (BUILD / "scene" / "placements.json").is_file()
+                                 or not (BUILD / "models" / "shunt_reactor" / "manifest.json").is_file(),
+                                 reason="no built scene with the shunt reactor")
+TINY = r.PhoneCamera(width=64, height=48, samples=4)
+
+
+def test_projection_matches_intrinsics():
+    k = r.intrinsics(1.047 / 45, 320, 240)
+    pose = r.look_at((0.0, -25.0, 1.6), (0.0, 0.0, 1.6))
+    # The target projects on the principal point; a point at the FOV's edge on the border.
+    uv = r.project(np.array([[0.0, 0.0, 1.6], [25.0 * math.tan(k["hfov"] / 2), 0.0, 1.6]]), pose, k)
+    assert np.allclose(uv[0], (160.0, 120.0))
+    assert np.allclose(uv[1], (320.0, 120.0))
+    assert np.isnan(r.project(np.array([[0.0, -30.0, 1.6]]), pose, k)).all()  # behind
+
+
+def test_gauge_box_surrounds_dial_centre():
+    model = np.eye(4)
+    centre = r.DIAL_CENTER
+    pose = r.look_at(centre + (0.0, -25.0, 0.0), centre)
+    k = r.intrinsics(1.047 / 45, 320, 240)
+    g = r.gauge_box(model, pose, k)
+    x0, y0, x1, y1 = g["box"]
+    assert g["inside_frame"] and x0 < 160 < x1 and y0 < 120 < y1
+    assert x1 - x0 == pytest.approx(2 * r.DIAL_RADIUS * k["fx"] / 25.0, rel=0.01)
+
+
+def test_exposure_clamps_at_night_and_sensor_saturates():
+    dark = np.full((8, 8, 3), 1e-4, np.float32)
+    assert r.metered_gain(dark, r.PhoneCamera()) == r.PhoneCamera().gain_max
+    assert (r.develop(dark, r.PhoneCamera().gain_max, 0.0) < 30).all()  # night stays dark
+    assert (r.develop(np.ones((2, 2, 3)), 2.0, 0.0) == 255).all()
+
+
+def test_veil_needs_the_sun_in_front_and_visible():
+    axis = np.array([0.0, 1.0, 0.0])
+    cam = r.PhoneCamera()
+    assert r.veil_radiance(axis, axis, 800.0, True, cam) == pytest.approx(cam.veil_k * 800.0)
+    assert r.veil_radiance(-axis, axis, 800.0, True, cam) == 0.0
+    assert r.veil_radiance(axis, axis, 800.0, False, cam) == 0.0
+
+
+def test_pointer_angle_follows_binding():
+    b = {"domain": [0.0, 100.0], "range": [-2.356, 2.356]}
+    assert r.pointer_angle(50.0, b) == pytest.approx(0.0)
+    assert r.pointer_angle(0.0, b) == pytest.approx(-2.356)
+    assert r.pointer_angle(120.0, b) == pytest.approx(2.356)
+
+
+def test_cull_keeps_what_is_seen_and_shadowing():
+    pose = r.look_at((0.0, -25.0, 1.6), (0.0, 0.0, 1.6))
+    k = r.intrinsics(0.2, 64, 48)
+    items = [{"tag": "seen", "centre": (0.0, 0.0, 1.6), "radius": 1.0},
+             {"tag": "aside", "centre": (40.0, 0.0, 1.6), "radius": 1.0},
+             {"tag": "shadower", "centre": (0.0, 0.0, 11.6), "radius": 1.0}]
+    assert [i["tag"] for i in r.cull(items, pose, k, 0.1, 100.0, None)] == ["seen"]
+    sun = np.array([0.0, 0.0, 1.0])
+    assert {i["tag"] for i in r.cull(items, pose, k, 0.1, 100.0, sun)} == {"seen", "shadower"}
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+@needs_build
+def test_frames_labels_and_determinism(tmp_path):
+    site = r.load_site(BUILD)
+    shots = [s for _, s in r.study_shots(site)]
+    night, noon = shots[1], shots[4]
+    a = r.render_shots(site, [noon], tmp_path / "a", cam=TINY, seed=7)[0]
+    b = r.render_shots(site, [noon], tmp_path / "b", cam=TINY, seed=7)[0]
+    assert a["sha256"] == b["sha256"] and np.array_equal(a["rgb"], b["rgb"])
+    labels = json.loads((tmp_path / "a" / "frame_0000.json").read_text())
+    g = labels["gauges"]["gauge_tank"]
+    x0, y0, x1, y1 = g["box"]
+    assert g["inside_frame"] and x0 < g["centre"][0] < x1 and y0 < g["centre"][1] < y1
+    assert labels["camera"]["fx"] == pytest.approx(32.0 / math.tan(1.047 / 45 / 2))
+    # The box lands on the dial: it holds the image's brightest (white dial) pixels.
+    gray = a["rgb"].mean(axis=2)
+    ys, xs = np.nonzero(gray >= np.percentile(gray, 90))
+    inside = (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)
+    assert inside.mean() > 0.6
+    dark = r.render_shots(site, [night], tmp_path / "n", cam=TINY, seed=7)[0]
+    assert float((dark["rgb"].mean(axis=2) > 240).mean()) == 0.0
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+@needs_build
+def test_study_table(tmp_path):
+    import shutil
+
+    shutil.copytree(BUILD / "scene", tmp_path / "scene")
+    (tmp_path / "models").symlink_to((BUILD / "models").resolve())
+    r.render_study(tmp_path, cam=TINY)
+    report = json.loads((tmp_path / "reports" / "study.json").read_text())
+    names = [c["condition"] for c in report["conditions"]]
+    assert names == ["early_night", "midnight", "late_night", "early_morning", "solar_noon", "late_afternoon"]
+    for c in report["conditions"]:
+        assert 0.0 <= c["S"] <= 1.0 and c["C"] >= 0.0
+        assert (tmp_path / "reports" / c["image"]).is_file()
+    assert report["conditions"][1]["S"] == 0.0
+    assert "late_afternoon" in (tmp_path / "reports" / "study.html").read_text()
