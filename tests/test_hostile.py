@@ -96,8 +96,6 @@ def test_insert_of_unknown_block(case):
     rejected(build(src, out), out, before, "plan.dxf", "X-1", "ghost")
 
 
-@pytest.mark.xfail(strict=True, reason="pipeline/ingest/floorplan.py accepts the TAG '../../../escaped' (nothing "
-                   "is written outside build/, asserted first, but the TAG is not rejected)")
 def test_tag_that_tries_to_escape_the_build(case):
     src, out, before = case
     placements = [*mini_sources.PLACEMENTS[:-1], ("../../../escaped", "kiosk", "L1", 2.0, 2.0, 0.0, 0.0)]

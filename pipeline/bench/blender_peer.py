@@ -61,7 +61,7 @@ def blender_section(ctx: Context) -> dict:
     if built is None:
         raise RuntimeError("no built sample (the build section failed)")
     work = ctx.work / "blender"
-    repeats = ctx.pick(1, 2)
+    repeats = 1  # a whole-scene export is minutes in Blender; loads below are repeated
     a = _blender("assemble", str(built), str(work), str(repeats))
     ctx.shared["blender_glb"] = a["glb"]
     ours = {p.suffix: p for p in sorted((built / "scene").iterdir()) if p.suffix in (".glb", ".usda")}

@@ -25,6 +25,14 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
+def _no_minor_labels(ax) -> None:
+    """Log axes label their minor ticks when the range is short: unreadable in small plots."""
+    from matplotlib.ticker import NullFormatter
+
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
 MARKERS = {"meshoptimizer": "o", "pymeshlab": "s", "fast_simplification": "^"}
 
 
@@ -50,6 +58,7 @@ def lod(d: dict):
         ax.set_title(name + (f" (crashed: {', '.join(sorted(set(crashed)))})" if crashed else ""), fontsize=8)
         ax.set_xscale("log")
         ax.set_yscale("log")
+        _no_minor_labels(ax)
         ax.set_xlabel("time (s)", fontsize=7)
         ax.set_ylabel("Hausdorff error (m)", fontsize=7)
         ax.tick_params(labelsize=6)
@@ -226,6 +235,7 @@ def gltf_transform(d: dict):
                     textcoords="offset points")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    _no_minor_labels(ax)
     ax.set_xlabel("triangles of the coarsest level")
     ax.set_ylabel("Hausdorff error vs LOD0 (m)")
     ax.legend(fontsize=7)

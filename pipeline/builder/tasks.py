@@ -17,7 +17,8 @@ from ..export import names
 from .graph import Task, code_version, sha256_file
 
 ASSET_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
-              "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.export", "pipeline.builder.tasks")
+              "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.export", "pipeline.validate.checks",
+              "pipeline.builder.tasks")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
               "pipeline.scene", "pipeline.export", "pipeline.geometry.transform", "pipeline.builder.tasks")
 
@@ -38,16 +39,16 @@ def read_source(cfg: config.AssetConfig) -> ir.Asset:
     return read_mesh(cfg)
 
 
-def asset_steps(cfg: config.AssetConfig) -> list:
-    """The processing pipeline of one asset: a list of Asset -> Asset steps."""
+def asset_steps(cfg: config.AssetConfig) -> list[tuple[str, object]]:
+    """The processing pipeline of one asset: named Asset -> Asset steps, in order."""
     from ..geometry.clean import CleanOptions, clean
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain
 
     return [
-        clean(CleanOptions()),
-        collision_step(CollisionOptions(mode=cfg.collision_mode)),
-        lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m)),
+        ("clean", clean(CleanOptions())),
+        ("collision", collision_step(CollisionOptions(mode=cfg.collision_mode))),
+        ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m))),
     ]
 
 
@@ -82,6 +83,7 @@ def _inside(root: Path, name: str) -> Path:
 def build_asset(staging: Path, asset_toml: str) -> dict:
     """Task action: one asset's package."""
     from ..export import manifest
+    from ..validate.checks import as_dicts, check_asset
 
     timings = {}
     t = time.perf_counter()
@@ -89,16 +91,20 @@ def build_asset(staging: Path, asset_toml: str) -> dict:
     asset = read_source(cfg)
     asset = asset.with_(description=asset.description or cfg.description, category=cfg.category)
     timings["read"] = time.perf_counter() - t
-    for step in asset_steps(cfg):
+    # the modeller's file as authored, then what the steps made of it
+    source_findings = check_asset(asset, cfg.triangle_budget)
+    for name, step in asset_steps(cfg):
         t = time.perf_counter()
         asset = step(asset)
-        timings[getattr(step, "__name__", "step")] = time.perf_counter() - t
+        timings[name] = time.perf_counter() - t
+    built_findings = check_asset(asset, cfg.triangle_budget)
     t = time.perf_counter()
     models = Path(staging) / "models"
     models.mkdir(parents=True, exist_ok=True)
     outputs, lod_models = write_package(asset, models)
     source = {"file": cfg.source.name, "sha256": sha256_file(cfg.source), "config_sha256": sha256_file(cfg.path)}
     data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
+    data["findings"] = {"source": as_dicts(source_findings), "built": as_dicts(built_findings)}
     manifest.write(data, models / asset.id)
     timings["write"] = time.perf_counter() - t
     return {"asset": asset.id, "triangles": [lod["triangles"] for lod in data["lods"]],

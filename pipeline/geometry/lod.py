@@ -35,11 +35,18 @@ import numpy as np
 from .. import ir
 from ..errors import UserError
 from . import clean as _clean
-from .metrics import SurfaceDistance, face_normals, one_sided_hausdorff, query_points
+from .metrics import SurfaceDistance, face_normals, one_sided_hausdorff, query_points, vertex_normals
 from .transform import linear_scale
 
 METHODS = ("meshoptimizer", "pymeshlab", "fast_simplification")
 MEASURE_SAMPLES = 50_000
+# Measuring costs more than simplifying: sample in proportion to the mesh, within bounds.
+SAMPLES_PER_FACE = 4
+MIN_SAMPLES = 1_000
+# Below this many triangles a level saves nothing worth a measurement.
+MIN_FACES = 64
+# A result keeping this share of the faces is no simplification: stop searching.
+NO_GAIN = 0.95
 
 
 # --- raw simplifiers: (vertices (n, 3), faces (m, 3)) -> (vertices, faces) -------------
@@ -110,7 +117,8 @@ def simplify_to_count(vertices: np.ndarray, faces: np.ndarray, target_faces: int
 def flipped_face_count(reference: SurfaceDistance, vertices: np.ndarray, faces: np.ndarray, tolerance: float) -> int:
     """Faces of (vertices (n, 3), faces (m, 3)) that point against every nearby face of
     the reference surface (the candidates of its centroid within `tolerance` of the
-    nearest one). Thin two-sided parts are never counted: either side agrees."""
+    nearest one). Thin two-sided parts are never counted: either side agrees. Used for
+    simplifiers that move vertices; see `flipped_by_vertex_normals` for the others."""
     if len(faces) == 0:
         return 0
     normals = face_normals(vertices, faces)
@@ -123,6 +131,20 @@ def flipped_face_count(reference: SurfaceDistance, vertices: np.ndarray, faces: 
     has_area = np.linalg.norm(normals, axis=1) > 0
     # below -0.2: clearly facing away, not a face standing across a crease
     return int(((best < -0.2) & has_area).sum())
+
+
+def flipped_by_vertex_normals(normals: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Faces whose normal points against all three of their corners' ORIGINAL vertex
+    normals (normals: (n, 3) of the unsimplified mesh; faces index its vertices, as
+    meshoptimizer's output does). A face that turned over in a collapse disagrees with
+    the surface it came from at every corner; one merely crossing a crease agrees with
+    at least one, and a thin part's other side is never consulted."""
+    if len(faces) == 0:
+        return 0
+    n = face_normals(vertices, faces)
+    dots = np.einsum("kj,kcj->kc", n, normals[faces])
+    has_area = np.linalg.norm(n, axis=1) > 0
+    return int(((dots.max(axis=1) < -0.2) & has_area).sum())
 
 
 def _topology_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -153,9 +175,14 @@ class _Judge:
     """Measures candidates against one original mesh (indices built once)."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, samples: int):
+        samples = int(np.clip(SAMPLES_PER_FACE * len(faces), MIN_SAMPLES, samples))
         self.vertices, self.faces, self.samples = vertices, faces, samples
         self.reference = SurfaceDistance(vertices, faces, samples=samples)
-        self.non_manifold = _clean.non_manifold_edge_count(_topology_faces(vertices, faces))
+        topo = _topology_faces(vertices, faces)
+        self.non_manifold = _clean.non_manifold_edge_count(topo)
+        # normals on the welded surface, so a UV seam does not split a corner's normal
+        welded = vertex_normals(vertices, topo)
+        self.normals = welded[_clean.weld_map(vertices, _clean.weld_tolerance(vertices))]
         self.queries = query_points(vertices, faces, samples)  # the original side, reused
 
     def __call__(self, v: np.ndarray, f: np.ndarray, kept: np.ndarray | None, tolerance: float) -> Simplified:
@@ -165,12 +192,15 @@ class _Judge:
             f = f[~_clean.duplicate_faces(f)]
         if len(f) == 0:
             return Simplified(v, f, kept, math.inf, 0, 0)
+        if kept is not None:  # vertices are the original ones: judge flips at the corners
+            flips = flipped_by_vertex_normals(self.normals[kept], v, f)
+        else:
+            flips = flipped_face_count(self.reference, v, f, tolerance)
         used, f = _clean.compact(f, len(v))
         v = v[used]
         kept = None if kept is None else kept[used]
-        there = float(SurfaceDistance(v, f, samples=self.samples)(self.queries).max())
+        there = SurfaceDistance(v, f, samples=self.samples).max_distance(self.queries)
         back = one_sided_hausdorff(v, f, self.reference, self.samples)
-        flips = flipped_face_count(self.reference, v, f, tolerance)
         added = _clean.non_manifold_edge_count(_topology_faces(v, f)) - self.non_manifold
         return Simplified(v, f, kept, max(there, back), flips, added)
 
@@ -178,20 +208,25 @@ class _Judge:
 def _search_meshopt(judge: _Judge, budget: float, iterations: int) -> Simplified | None:
     """Largest meshoptimizer error target whose result measures within budget."""
     # meshoptimizer's own error estimate runs 2-5x below the measured Hausdorff
-    # distance: start at a third of the budget, step down by 3 until one passes
-    best, lo, hi, s = None, 0.0, math.inf, budget / 3.0
+    # distance: start at half the budget; on a miss, scale the target by how far the
+    # measurement overshot; on a pass, try one coarser target
+    best, s = None, budget / 2.0
     for _ in range(iterations):
         v, f = _meshopt(judge.vertices, judge.faces, 0, s)
+        if len(f) >= NO_GAIN * len(judge.faces):
+            break  # the mesh is as simple as this error allows: nothing to gain
         r = judge(v, f, np.arange(len(v)), budget)
         if r.valid and r.error_m <= budget:
             if best is None or len(r.faces) < len(best.faces):
                 best = r
-            lo = s
+            if best is not None and r.error_m > 0.5 * budget:
+                break
+            s *= 2.0
         else:
-            hi = s
-        s = s * 2.0 if hi == math.inf else (math.sqrt(lo * hi) if lo > 0 else hi / 3.0)
-        if hi < math.inf and lo > 0 and hi / lo < 1.2:
-            break
+            if best is not None:
+                break
+            over = r.error_m / budget if np.isfinite(r.error_m) and r.error_m > 0 else 4.0
+            s /= max(2.0, 1.5 * over)
     return best
 
 
@@ -216,27 +251,65 @@ def _search_count(judge: _Judge, budget: float, iterations: int, method: str) ->
 
 
 def simplify_checked(vertices: np.ndarray, faces: np.ndarray, budget_m: float, method: str = "meshoptimizer",
-                     iterations: int = 6, samples: int = MEASURE_SAMPLES) -> Simplified:
+                     iterations: int = 4, samples: int = MEASURE_SAMPLES, normals: np.ndarray | None = None,
+                     parts: np.ndarray | None = None) -> Simplified:
     """The coarsest checked simplification of a CLEAN mesh within `budget_m` (metres).
 
     vertices: (n, 3) float64, faces: (m, 3) int. When nothing coarser passes, the input
     itself comes back (error 0): a level never exceeds its budget and never vanishes.
+    meshoptimizer runs on the position-welded surface (CAD patches and UV/normal seams
+    duplicate vertices; unwelded, every seam is a border the simplifier tears open),
+    then each new corner goes back to the original vertex of the same place whose
+    normal (`normals: (n, 3)`, optional) best matches the new face, so crisp edges and
+    UVs survive. `parts: (n,)` ids keep separate parts from welding together.
     """
     if method not in METHODS:
         raise ValueError(f"unknown simplifier {method!r}; one of {METHODS}")
-    local, centre = _clean.centred(np.asarray(vertices, dtype=np.float64))
+    vertices = np.asarray(vertices, dtype=np.float64)
+    local, centre = _clean.centred(vertices)
     faces = np.asarray(faces, dtype=np.int64)
-    identity = Simplified(np.asarray(vertices, dtype=np.float64), faces, np.arange(len(vertices)), 0.0, 0, 0)
-    if len(faces) <= 1 or budget_m <= 0:
+    identity = Simplified(vertices, faces, np.arange(len(vertices)), 0.0, 0, 0)
+    if len(faces) < MIN_FACES or budget_m <= 0:
         return identity
-    judge = _Judge(local, faces, samples)
-    if method == "meshoptimizer":
-        best = _search_meshopt(judge, budget_m, iterations)
-    else:
-        best = _search_count(judge, budget_m, iterations, method)
+    if method != "meshoptimizer":
+        best = _search_count(_Judge(local, faces, samples), budget_m, iterations, method)
+        if best is None or len(best.faces) >= len(faces):
+            return identity
+        return replace(best, vertices=best.vertices + centre)
+
+    attrs = [] if parts is None else [(np.asarray(parts, dtype=np.float64)[:, None], 0.5)]
+    rep = _clean.weld_map(local, _clean.weld_tolerance(local), attrs)
+    first, welded_index = np.unique(rep, return_inverse=True)
+    welded_faces = welded_index[faces]
+    judge = _Judge(local[first], welded_faces, samples)
+    best = _search_meshopt(judge, budget_m, iterations)
     if best is None or len(best.faces) >= len(faces):
         return identity
-    return replace(best, vertices=best.vertices + centre)
+    corners = _original_corners(best.kept[best.faces], welded_index, local, normals)
+    used, new_faces = _clean.compact(corners, len(vertices))
+    return Simplified(vertices[used], new_faces, used, best.error_m, best.flipped, best.non_manifold_added)
+
+
+def _original_corners(welded_faces: np.ndarray, welded_index: np.ndarray, vertices: np.ndarray,
+                      normals: np.ndarray | None) -> np.ndarray:
+    """(m, 3) faces on welded vertices -> faces on original vertices: per corner, the
+    original vertex at that place whose normal agrees best with the new face's."""
+    order = np.argsort(welded_index, kind="stable")
+    starts = np.searchsorted(welded_index[order], np.arange(welded_index.max() + 1))
+    counts = np.bincount(welded_index, minlength=len(starts))
+    corners = order[starts[welded_faces]]  # the first original of each welded vertex
+    if normals is None or counts.max() == 1:
+        return corners
+    face_n = face_normals(vertices, corners)
+    best = np.einsum("kj,kcj->kc", face_n, normals[corners])
+    for j in range(1, int(counts.max())):
+        has = counts[welded_faces] > j
+        cand = order[np.minimum(starts[welded_faces] + j, len(order) - 1)]
+        score = np.einsum("kj,kcj->kc", face_n, normals[cand])
+        better = has & (score > best)
+        corners = np.where(better, cand, corners)
+        best = np.where(better, score, best)
+    return corners
 
 
 def simplify(vertices: np.ndarray, faces: np.ndarray, target_error_m: float,
@@ -263,8 +336,8 @@ class LodOptions:
 
     budgets_m: tuple[float, ...] = (0.005, 0.02, 0.08)
     method: str = "meshoptimizer"
-    iterations: int = 6
-    samples: int = MEASURE_SAMPLES
+    iterations: int = 4
+    samples: int = 20_000
 
 
 def frozen_visuals(asset: ir.Asset) -> set[str]:
@@ -287,10 +360,15 @@ def lod_chain(options: LodOptions = LodOptions()) -> Callable[[ir.Asset], ir.Ass
     """Step: Visual.lods = (authored, LOD1, ..., LODk) and Asset.lods = LodInfo for
     levels 0..k (level 0: the authored meshes, budget and error 0).
 
-    A visual's budget is divided by the largest scale of its pose chain, so the error
-    is met in the model frame. A level's error is the largest of its visuals' errors
-    (the Hausdorff distance of a union is at most the largest part's). Frozen visuals
-    (shape keys, state bindings) repeat their Mesh object at every level.
+    With meshoptimizer the free visuals of a link are simplified together, in the link
+    frame: CAD-like assets are hundreds of small parts, and one search over their union
+    costs one measurement instead of hundreds. meshoptimizer collapses only along edges
+    and keeps the original vertices, so every new face belongs to one part and the
+    result splits back per visual exactly. Other methods move vertices and run per
+    visual. A level's error is the measured two-sided Hausdorff distance of the union
+    (the largest part's, per visual). Frozen visuals (shape keys, state bindings)
+    repeat their Mesh object at every level; a part that would vanish keeps its
+    previous level's mesh, so nothing disappears.
     """
     budgets = tuple(float(b) for b in options.budgets_m)
     if list(budgets) != sorted(budgets) or any(b <= 0 for b in budgets):
@@ -303,21 +381,20 @@ def lod_chain(options: LodOptions = LodOptions()) -> Callable[[ir.Asset], ir.Ass
         errors = np.zeros(len(budgets))
         links = []
         for link in asset.links:
-            visuals = []
+            chains: dict[str, list[ir.Mesh]] = {}
+            free = []
             for vis in link.visuals:
-                mesh = vis.mesh
-                if vis.name in frozen or mesh.triangle_count == 0:
-                    visuals.append(replace(vis, lods=(mesh,) * (len(budgets) + 1)))
-                    continue
-                _check_clean(asset, vis)
-                scale = max(linear_scale(link.pose @ vis.pose), 1e-12)
-                lods = [mesh]
-                for i, b in enumerate(budgets):
-                    r = simplify_checked(mesh.vertices, mesh.faces, b / scale, options.method,
-                                         options.iterations, options.samples)
-                    lods.append(mesh if r.faces is mesh.faces else _lod_mesh(mesh, r))
-                    errors[i] = max(errors[i], r.error_m * scale)
-                visuals.append(replace(vis, lods=tuple(lods)))
+                if vis.name in frozen or vis.mesh.triangle_count == 0:
+                    chains[vis.name] = [vis.mesh] * (len(budgets) + 1)
+                else:
+                    _check_clean(asset, vis)
+                    free.append(vis)
+            groups = [free] if options.method == "meshoptimizer" else [[v] for v in free]
+            for group in (g for g in groups if g):
+                lods, errs = _group_chain(group, budgets, options, linear_scale(link.pose))
+                chains.update(lods)
+                errors = np.maximum(errors, errs)
+            visuals = [replace(v, lods=tuple(chains[v.name])) for v in link.visuals]
             links.append(replace(link, visuals=tuple(visuals)))
         out = asset.with_(links=tuple(links))
         infos = [ir.LodInfo(0, 0.0, 0.0, out.triangle_count(0))]
@@ -325,6 +402,43 @@ def lod_chain(options: LodOptions = LodOptions()) -> Callable[[ir.Asset], ir.Ass
         return out.with_(lods=tuple(infos))
 
     return step
+
+
+def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scale: float):
+    """LOD chains of visuals simplified as one mesh in their link's frame.
+    Returns ({visual name: [mesh per level]}, errors per level in the model frame)."""
+    poses = [v.pose for v in group]
+    parts = [(np.c_[v.mesh.vertices, np.ones(len(v.mesh.vertices))] @ p.T)[:, :3] for v, p in zip(group, poses)]
+    offsets = np.cumsum([0] + [len(p) for p in parts])
+    vertices = np.concatenate(parts)
+    faces = np.concatenate([v.mesh.faces.astype(np.int64) + o for v, o in zip(group, offsets[:-1])])
+    rotations = [p[:3, :3] for p in poses]
+    has_normals = all(v.mesh.normals is not None for v in group)
+    normals = np.concatenate([v.mesh.normals @ r.T for v, r in zip(group, rotations)]) if has_normals else None
+    parts_id = np.repeat(np.arange(len(group)), np.diff(offsets))
+    scale = max(link_scale, 1e-12)
+    chains = {v.name: [v.mesh] for v in group}
+    errors = np.zeros(len(budgets))
+    for i, b in enumerate(budgets):
+        r = simplify_checked(vertices, faces, b / scale, options.method, options.iterations, options.samples,
+                             normals=normals, parts=parts_id)
+        errors[i] = r.error_m * scale
+        if r.faces is faces or len(group) == 1 and r.kept is None:
+            for v in group:
+                chains[v.name].append(v.mesh if r.faces is faces else _lod_mesh(v.mesh, r))
+            continue
+        owner = np.searchsorted(offsets, r.kept, side="right") - 1
+        face_owner = owner[r.faces[:, 0]]
+        for k, v in enumerate(group):
+            sel = r.faces[face_owner == k]
+            if len(sel) == 0:  # a part never vanishes: keep its previous level
+                chains[v.name].append(chains[v.name][-1])
+                continue
+            used, local_faces = _clean.compact(sel, len(r.kept))
+            kept = r.kept[used] - offsets[k]
+            mine = Simplified(v.mesh.vertices[kept], local_faces, kept, r.error_m, 0, 0)
+            chains[v.name].append(_lod_mesh(v.mesh, mine))
+    return chains, errors
 
 
 def _check_clean(asset: ir.Asset, vis: ir.Visual) -> None:

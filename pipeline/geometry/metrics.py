@@ -43,6 +43,17 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n, 3) unit area-weighted vertex normals (zero for unused vertices)."""
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    n = np.cross(b - a, c - a)  # length = twice the area: the weight
+    acc = np.zeros_like(vertices, dtype=np.float64)
+    for k in range(3):
+        np.add.at(acc, faces[:, k], n)
+    length = np.linalg.norm(acc, axis=1, keepdims=True)
+    return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
+
+
 def sample_surface(vertices: np.ndarray, faces: np.ndarray, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """`count` points on the surface, area-weighted, deterministic for a seed.
 
@@ -184,10 +195,47 @@ class SurfaceDistance:
         return np.concatenate(cands), np.concatenate(dists)
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
-        """(k,) distances from `points: (k, 3)` (same frame as the constructor's vertices)."""
+        """(k,) distances from `points: (k, 3)` (same frame as the constructor's
+        vertices). Exact distances to candidate faces, so each value is an UPPER bound
+        of the true distance: the candidates can miss the nearest face when another
+        part's large faces crowd the index near a point. `max_distance` is exact."""
         if self.tree is None:
             return np.full(len(points), np.inf)
         return self.nearest_faces(points)[1].min(axis=1)
+
+    def exact(self, points: np.ndarray) -> np.ndarray:
+        """(k,) true distances from `points: (k, 3)`: every face whose bounding box
+        comes within the candidate bound is tested (an AABB tree, through trimesh)."""
+        import trimesh
+
+        if self.tree is None:
+            return np.full(len(points), np.inf)
+        if not hasattr(self, "_mesh"):
+            self._mesh = trimesh.Trimesh(self.vertices, self.faces, process=False, validate=False)
+        _, d, _ = trimesh.proximity.closest_point(self._mesh, np.asarray(points, dtype=np.float64) - self.origin)
+        return np.asarray(d, dtype=np.float64)
+
+    def max_distance(self, points: np.ndarray) -> float:
+        """The largest true distance from `points: (k, 3)` to the surface.
+
+        Candidate distances bound each point from above; points are verified exactly
+        in order of their bound until no remaining bound can beat the verified
+        maximum. Usually a few dozen exact queries settle it."""
+        if len(points) == 0:
+            return 0.0
+        if self.tree is None:
+            return float("inf")
+        points = np.asarray(points, dtype=np.float64)
+        upper = self(points)
+        order = np.argsort(-upper, kind="stable")
+        best, start, batch = 0.0, 0, 32
+        while start < len(order) and upper[order[start]] > best:
+            idx = order[start:start + batch]
+            idx = idx[upper[idx] > best]
+            best = max(best, float(self.exact(points[idx]).max()))
+            start += batch
+            batch *= 2
+        return best
 
 
 def query_points(vertices: np.ndarray, faces: np.ndarray, samples: int = DEFAULT_SAMPLES, seed: int = 0) -> np.ndarray:
@@ -225,7 +273,7 @@ def one_sided_hausdorff(src_v: np.ndarray, src_f: np.ndarray, dst: SurfaceDistan
     pts = query_points(np.asarray(src_v, dtype=np.float64), np.asarray(src_f, dtype=np.int64), samples, seed)
     if len(pts) == 0:
         return 0.0
-    return float(dst(pts).max())
+    return dst.max_distance(pts)
 
 
 def hausdorff(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray,

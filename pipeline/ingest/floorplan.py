@@ -10,6 +10,7 @@ dropped. Any problem is one UserError naming the file and the INSERT (TAG or han
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter
 from pathlib import Path
 
@@ -22,6 +23,7 @@ from ..errors import UserError
 UNITS = {4: ("mm", 0.001), 6: ("m", 1.0)}
 UNITS_ASSUMED = "m (assumed: $INSUNITS is 0, unitless)"
 PLATFORM_PREFIX = "PLATFORM_"
+SAFE_TAG = re.compile(r"^(?!.*\.\.)[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 # Arcs in a platform outline are flattened to this chord error (drawing metres).
 ARC_TOLERANCE_M = 0.01
 
@@ -112,6 +114,9 @@ def _placement(insert, path: Path, to_m: float, known_assets, levels) -> ir.Plac
     block = insert.dxf.name
     if tag is None:
         raise UserError(path, where, f"INSERT of block {block!r} has no TAG attribute")
+    if not SAFE_TAG.match(tag):
+        # TAGs become prim paths, world names and run-output file names
+        raise UserError(path, where, "TAG may hold letters, digits, '-', '_' and '.', not a path (no '/', '\\' or '..')")
     level = attrs.get("LEVEL")
     if not level:
         raise UserError(path, where, "no LEVEL attribute")
