@@ -191,7 +191,7 @@ def build_section(ctx: Context) -> dict:
     data["noop"] = noop(ctx, sources, built, ctx.pick(2, 5))
     data["one_asset_edit"] = one_asset_edit(ctx, sources, built, 1, ctx.pick(1, 3), ctx.pick(0.0, 45.0))
     multiples = ctx.pick([1, 2], [1, 2, 5, 10])
-    data["placements"] = placements(ctx, sources, built, multiples, ctx.pick(1, 3), ctx.pick(0.0, 120.0))
+    data["placements"] = placements(ctx, sources, built, multiples, ctx.pick(1, 3), ctx.pick(0.0, 60.0))
     ctx.shared["built_sources"] = ctx.shared.get("scene_sources", sources)
     counts = ctx.pick([1], sorted({1, min(4, len(used))}))
     data["unique_assets"] = unique_assets(ctx, sources, counts)

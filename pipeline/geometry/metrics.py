@@ -22,6 +22,8 @@ coordinates of 10^7 m lose nothing.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -81,18 +83,19 @@ def point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.n
     """(k,) exact distances from points p (k, 3) to triangles (a, b, c), each (k, 3).
 
     Ericson, Real-Time Collision Detection 5.1.5: find the Voronoi region of the
-    closest feature (vertex, edge, face) with dot products only. Degenerate triangles
-    fall back to the nearest of their vertices and edges handled by the same regions.
+    closest feature (vertex, edge, face) with dot products only, as barycentric
+    weights (v, w) of the closest point a + v ab + w ac. Degenerate triangles fall
+    back to the nearest of their vertices and edges handled by the same regions.
     """
     ab, ac, ap = b - a, c - a, p - a
     d1 = np.einsum("ij,ij->i", ab, ap)
     d2 = np.einsum("ij,ij->i", ac, ap)
-    bp = p - b
-    d3 = np.einsum("ij,ij->i", ab, bp)
-    d4 = np.einsum("ij,ij->i", ac, bp)
-    cp = p - c
-    d5 = np.einsum("ij,ij->i", ab, cp)
-    d6 = np.einsum("ij,ij->i", ac, cp)
+    ab_ab = np.einsum("ij,ij->i", ab, ab)
+    ab_ac = np.einsum("ij,ij->i", ab, ac)
+    ac_ac = np.einsum("ij,ij->i", ac, ac)
+    # d3..d6 of Ericson from bp = ap - ab, cp = ap - ac
+    d3, d4 = d1 - ab_ab, d2 - ab_ac
+    d5, d6 = d1 - ab_ac, d2 - ac_ac
     vc = d1 * d4 - d3 * d2
     vb = d5 * d2 - d1 * d6
     va = d3 * d6 - d5 * d4
@@ -100,24 +103,25 @@ def point_triangle_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.n
         denom = va + vb + vc
         v = np.where(denom != 0, vb / denom, 0.0)
         w = np.where(denom != 0, vc / denom, 0.0)
-        closest = a + ab * v[:, None] + ac * w[:, None]  # face region
         # later assignments win: go from the least to the most specific test
-        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        m = (va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0)
-        closest = np.where(m[:, None], b + (c - b) * np.nan_to_num(t)[:, None], closest)
-        t = d2 / (d2 - d6)
+        e43, e56 = d4 - d3, d5 - d6
+        t = np.nan_to_num(e43 / (e43 + e56))
+        m = (va <= 0) & (e43 >= 0) & (e56 >= 0)
+        v, w = np.where(m, 1.0 - t, v), np.where(m, t, w)
+        t = np.nan_to_num(d2 / (d2 - d6))
         m = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
-        closest = np.where(m[:, None], a + ac * np.nan_to_num(t)[:, None], closest)
+        v, w = np.where(m, 0.0, v), np.where(m, t, w)
         m = (d6 >= 0) & (d5 <= d6)
-        closest = np.where(m[:, None], c, closest)
-        t = d1 / (d1 - d3)
+        v, w = np.where(m, 0.0, v), np.where(m, 1.0, w)
+        t = np.nan_to_num(d1 / (d1 - d3))
         m = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
-        closest = np.where(m[:, None], a + ab * np.nan_to_num(t)[:, None], closest)
+        v, w = np.where(m, t, v), np.where(m, 0.0, w)
         m = (d3 >= 0) & (d4 <= d3)
-        closest = np.where(m[:, None], b, closest)
+        v, w = np.where(m, 1.0, v), np.where(m, 0.0, w)
         m = (d1 <= 0) & (d2 <= 0)
-        closest = np.where(m[:, None], a, closest)
-    dist = np.linalg.norm(p - closest, axis=1)
+        v, w = np.where(m, 0.0, v), np.where(m, 0.0, w)
+    diff = ap - ab * v[:, None] - ac * w[:, None]
+    dist = np.sqrt(np.einsum("ij,ij->i", diff, diff))
     # a degenerate triangle can leave NaN: its vertices are still a valid upper bound
     bad = ~np.isfinite(dist)
     if bad.any():
@@ -129,26 +133,41 @@ class SurfaceDistance:
     """Distance queries from points to the surface `vertices: (n, 3)`, `faces: (m, 3)`.
 
     Build once, query many times (the LOD search measures several candidates against
-    the same original). `samples` extra area-weighted points densify the candidate
-    index on large faces.
+    the same original). Faces are indexed by size: one cKDTree of face centroids per
+    class of circumradius R (powers of 4), so the nearest face's centroid, within
+    d + R of a point at distance d, is near the top of its own class's answer however
+    large the faces of other parts crowding the point are. `samples` extra
+    area-weighted points (owned by their faces) add candidates on large faces.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray | None = None,
                  samples: int = DEFAULT_SAMPLES, seed: int = 1, candidates: int = DEFAULT_CANDIDATES):
         self.origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
         self.vertices = np.asarray(vertices, dtype=np.float64) - self.origin
-        self.faces = np.asarray(faces, dtype=np.int64)
+        self.faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         self.candidates = candidates
         if len(self.faces) == 0:
             self.tree = None
             return
-        m = len(self.faces)
-        centroids = self.vertices[self.faces].mean(axis=1)
-        pts, owner = sample_surface(self.vertices, self.faces, samples, seed)
-        self.points = np.concatenate([centroids, pts])
-        self.owner = np.concatenate([np.arange(m), owner])
+        tri = self.vertices[self.faces]
+        centroids = tri.mean(axis=1)
+        radius = np.linalg.norm(tri - centroids[:, None], axis=2).max(axis=1)
+        self.radius = radius
+        level = np.floor(np.log(np.maximum(radius, 1e-12)) / np.log(4.0)).astype(np.int64)
+        self.classes = []  # (centroid tree, face ids, largest circumradius)
+        for lv in np.unique(level):
+            ids = np.flatnonzero(level == lv)
+            self.classes.append((cKDTree(centroids[ids]), ids, float(radius[ids].max())))
+        # samples only where faces are large: small faces are covered by their centroids
+        big = radius > np.median(radius) * 4.0
+        if samples > 0 and big.any():
+            pts, owner = sample_surface(self.vertices, self.faces[big], samples, seed)
+            self.points, self.owner = pts, np.flatnonzero(big)[owner]
+            self.tree = cKDTree(self.points)
+        else:
+            self.points, self.owner = centroids[:1], np.zeros(1, dtype=np.int64)
+            self.tree = cKDTree(self.points)
         self.neighbours = face_neighbours(self.faces)
-        self.tree = cKDTree(self.points)
 
     def _distances(self, p: np.ndarray, cand: np.ndarray) -> np.ndarray:
         """(k, c) exact distances from p (k, 3) to candidate faces cand (k, c)."""
@@ -158,20 +177,45 @@ class SurfaceDistance:
         d = point_triangle_distance(pp, self.vertices[t[:, 0]], self.vertices[t[:, 1]], self.vertices[t[:, 2]])
         return d.reshape(len(p), c)
 
-    def nearest_faces(self, points: np.ndarray, chunk: int = 200_000, walk: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    def _candidates(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Candidate faces (k, c) of p (k, 3) in the internal frame, the owners of the
+        nearest centroids of every size class and of the nearest samples, and their
+        exact distances (k, c) (inf where a face cannot be the nearest: its centroid
+        is further than its circumradius beyond another candidate's farthest point)."""
+        cols, lower, upper = [], [], []
+        for tree, ids, _ in self.classes:
+            kk = min(self.candidates, len(ids))
+            dc, idx = tree.query(p, k=kk, workers=-1)
+            f = ids[idx.reshape(len(p), kk)]
+            r = self.radius[f]
+            dc = dc.reshape(len(p), kk)
+            cols.append(f), lower.append(dc - r), upper.append(dc + r)
+        kk = min(self.candidates, len(self.points))
+        ds, idx = self.tree.query(p, k=kk, workers=-1)
+        f = self.owner[idx.reshape(len(p), kk)]
+        ds = ds.reshape(len(p), kk)
+        cols.append(f), lower.append(ds - 2.0 * self.radius[f]), upper.append(ds)
+        cand, lower = np.concatenate(cols, axis=1), np.concatenate(lower, axis=1)
+        bound = np.concatenate(upper, axis=1).min(axis=1, keepdims=True)
+        test = lower <= bound
+        d = np.full(cand.shape, np.inf)
+        rows, cols_ = np.nonzero(test)
+        t = self.faces[cand[rows, cols_]]
+        d[rows, cols_] = point_triangle_distance(p[rows], self.vertices[t[:, 0]], self.vertices[t[:, 1]],
+                                                 self.vertices[t[:, 2]])
+        return cand, d
+
+    def nearest_faces(self, points: np.ndarray, chunk: int = 100_000, walk: int = 16) -> tuple[np.ndarray, np.ndarray]:
         """Candidate faces (k, c) int64 of `points: (k, 3)` and their exact distances
         (k, c): the owners of the nearest index points, then a greedy walk across edge
         neighbours while that gets closer (at most `walk` steps). The walk finds the
-        triangle really holding the closest point when the nearest samples sit on
+        triangle really holding the closest point when the nearest centroids sit on
         neighbouring slivers; the last column holds the walk's best face."""
         points = np.asarray(points, dtype=np.float64) - self.origin
-        kk = min(self.candidates, len(self.points))
         cands, dists = [], []
         for start in range(0, len(points), chunk):
             p = points[start:start + chunk]
-            _, idx = self.tree.query(p, k=kk, workers=-1)
-            cand = self.owner[idx.reshape(len(p), kk)]
-            d = self._distances(p, cand)
+            cand, d = self._candidates(p)
             rows = np.arange(len(p))
             best = cand[rows, d.argmin(axis=1)]
             best_d = d.min(axis=1)
@@ -191,36 +235,67 @@ class SurfaceDistance:
             cands.append(np.concatenate([cand, best[:, None]], axis=1))
             dists.append(np.concatenate([d, best_d[:, None]], axis=1))
         if not cands:
-            return np.zeros((0, kk + 1), dtype=np.int64), np.zeros((0, kk + 1))
+            return np.zeros((0, 1), dtype=np.int64), np.zeros((0, 1))
         return np.concatenate(cands), np.concatenate(dists)
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         """(k,) distances from `points: (k, 3)` (same frame as the constructor's
         vertices). Exact distances to candidate faces, so each value is an UPPER bound
-        of the true distance: the candidates can miss the nearest face when another
-        part's large faces crowd the index near a point. `max_distance` is exact."""
+        of the true distance (equal to it for nearly every point; `exact` and
+        `max_distance` are exact)."""
         if self.tree is None:
             return np.full(len(points), np.inf)
         return self.nearest_faces(points)[1].min(axis=1)
 
-    def exact(self, points: np.ndarray) -> np.ndarray:
-        """(k,) true distances from `points: (k, 3)`: every face whose bounding box
-        comes within the candidate bound is tested (an AABB tree, through trimesh)."""
-        import trimesh
-
+    def exact(self, points: np.ndarray, upper: np.ndarray | None = None, pairs: int = 2_000_000) -> np.ndarray:
+        """(k,) true distances from `points: (k, 3)`. From an upper bound u of a point
+        (`upper`, else the candidates'), the nearest face (distance d <= u, circumradius
+        R) has its centroid within u + R: every face of a size class whose centroid is
+        within u + (the class's largest R) is tested. Classes go from small faces to
+        large, each shrinking u for the next."""
         if self.tree is None:
             return np.full(len(points), np.inf)
-        if not hasattr(self, "_mesh"):
-            self._mesh = trimesh.Trimesh(self.vertices, self.faces, process=False, validate=False)
-        _, d, _ = trimesh.proximity.closest_point(self._mesh, np.asarray(points, dtype=np.float64) - self.origin)
-        return np.asarray(d, dtype=np.float64)
+        p_all = np.asarray(points, dtype=np.float64) - self.origin
+        best = (self(points) if upper is None else np.asarray(upper, dtype=np.float64)).copy()
+        if len(p_all) == 0:
+            return best
+        for tree, ids, rmax in self.classes:
+            counts = tree.query_ball_point(p_all, best + rmax, workers=-1, return_length=True)
+            todo = np.flatnonzero(counts > 0)
+            # chunk so the (point, face) pairs stay within `pairs`
+            bounds = np.searchsorted(np.cumsum(counts[todo]), np.arange(pairs, counts.sum() + pairs, pairs))
+            start = 0
+            for stop in np.unique(np.r_[bounds, len(todo)]):
+                sel = todo[start:stop]
+                start = stop
+                if len(sel) == 0:
+                    continue
+                lists = tree.query_ball_point(p_all[sel], best[sel] + rmax, workers=-1, return_sorted=False)
+                lens = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(sel))
+                flat = np.fromiter(itertools.chain.from_iterable(lists), dtype=np.int64, count=int(lens.sum()))
+                rows = np.repeat(sel, lens)
+                t = self.faces[ids[flat]]
+                d = point_triangle_distance(p_all[rows], self.vertices[t[:, 0]], self.vertices[t[:, 1]],
+                                            self.vertices[t[:, 2]])
+                np.minimum.at(best, rows, d)
+        return best
+
+    def distances_above(self, points: np.ndarray, threshold: float) -> np.ndarray:
+        """(k,) distances from `points: (k, 3)`: exact wherever the true distance exceeds
+        `threshold`, an upper bound <= threshold elsewhere (cheap: only points whose
+        candidate bound exceeds the threshold are verified)."""
+        upper = self(points)
+        over = np.flatnonzero(upper > threshold)
+        if len(over):
+            upper[over] = self.exact(np.asarray(points)[over], upper[over])
+        return upper
 
     def max_distance(self, points: np.ndarray) -> float:
         """The largest true distance from `points: (k, 3)` to the surface.
 
         Candidate distances bound each point from above; points are verified exactly
         in order of their bound until no remaining bound can beat the verified
-        maximum. Usually a few dozen exact queries settle it."""
+        maximum. The bounds are nearly always exact, so few points need verifying."""
         if len(points) == 0:
             return 0.0
         if self.tree is None:
@@ -228,13 +303,13 @@ class SurfaceDistance:
         points = np.asarray(points, dtype=np.float64)
         upper = self(points)
         order = np.argsort(-upper, kind="stable")
-        best, start, batch = 0.0, 0, 32
+        best, start, batch = 0.0, 0, 256
         while start < len(order) and upper[order[start]] > best:
             idx = order[start:start + batch]
             idx = idx[upper[idx] > best]
-            best = max(best, float(self.exact(points[idx]).max()))
+            best = max(best, float(self.exact(points[idx], upper[idx]).max()))
             start += batch
-            batch *= 2
+            batch *= 4
         return best
 
 

@@ -130,7 +130,7 @@ def _terrain_heights(folder: Path, placed, terrain_manifest, height_at) -> np.nd
         prim = doc["meshes"][doc["nodes"][ni]["mesh"]]["primitives"][0]
         pos = _accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
         idx = _accessor(doc, binary, prim["indices"]).reshape(-1, 3)
-        pos = (np.c_[pos, np.ones(len(pos))] @ (scene_gltf.Z_TO_Y.T @ m.T))[:, :3]
+        pos = (np.c_[pos, np.ones(len(pos))] @ (m.T @ scene_gltf.Z_TO_Y))[:, :3]  # Y-up -> ENU
         visuals.append(ir.Visual(str(ni), "x", (ir.Mesh(pos, idx),)))
     terrain = ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=visuals),))
     en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))

@@ -140,7 +140,7 @@ def terrain_asset(site: Site, platforms: list[ir.Platform], georef, name: str) -
         mesh = ir.Mesh(enu, faces.astype(np.int32))
         mat = "gravel" if sname.startswith("platform") else ("grass" if sname == "ground" else "soil")
         visuals.append(ir.Visual(sname, mat, (mesh,)))
-        collisions.append(ir.Collision(sname, mesh))
+        collisions.append(ir.Collision(f"{sname}_collision", mesh))
     link = ir.Link("terrain", visuals=visuals, collisions=collisions, mass=1.0)
     return ir.Asset(id=name, category="terrain", links=(link,), materials=materials,
                     description=f"terraced terrain of {site.name}")
