@@ -99,10 +99,10 @@ def validate(sources: Path, out: Path):
 @OUT
 @user_errors
 def run(scenario: Path, out: Path):
-    """Run a scenario: states and variants over time, into OUT/runs/<scenario>/."""
+    """Run a scenario on the built scene OUT: states and variants over time, into OUT/runs/<scenario>/."""
     from .runtime.run import run_scenario
 
-    summary = run_scenario(scenario, out, out / "runs")
+    summary = run_scenario(scenario, out)
     click.echo(json.dumps(summary, indent=1, sort_keys=True))
 
 

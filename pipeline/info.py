@@ -71,7 +71,7 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
 
 
 def render(r: InfoReport, console: Console | None = None) -> None:
-    console = console or Console()
+    console = console or Console(width=140)
     console.print(f"[bold]{r.site}[/] ({r.sources})")
     table = Table("category", "asset", "source", "triangles", "placements")
     for asset_id, a in sorted(r.assets.items(), key=lambda kv: (kv[1]["category"], kv[0])):

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 DEFAULT_SAMPLES = 100_000
-DEFAULT_CANDIDATES = 4
+DEFAULT_CANDIDATES = 2
 
 
 def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

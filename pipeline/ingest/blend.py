@@ -34,9 +34,12 @@ without Blender. Everything else here is plain numpy on arrays.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import os
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -108,6 +111,22 @@ def read_blend_path(
 # --- opening the file -----------------------------------------------------------
 
 
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Blender's C logger prints 'Read blend: ...' on file descriptor 1 for every open;
+    builds print progress there. Errors still arrive as exceptions."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
 def _open(path: Path) -> None:
     """Load `path` as Blender's main file without running anything stored in it.
 
@@ -121,7 +140,8 @@ def _open(path: Path) -> None:
     # Python-expression drivers.
     bpy.context.preferences.filepaths.use_scripts_auto_execute = False
     try:
-        bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
+        with _quiet_stdout():
+            bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
     except RuntimeError as e:
         reason = str(e).strip().splitlines()[0] if str(e).strip() else "unreadable"
         reason = reason.removeprefix("Error: ")
