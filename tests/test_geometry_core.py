@@ -158,3 +158,21 @@ def test_uv_rule_and_unwrap():
     v, f, uvs, vmap = uv.unwrap(s.vertices, s.faces)
     np.testing.assert_array_equal(v, s.vertices[vmap])
     assert volume(v, f) > 0  # winding kept
+
+
+def test_surface_distance_exact_beside_crowding_parts():
+    # a sphere pierced by a long thin cylinder: the cylinder's 10 m faces crowd the
+    # candidate index near the sphere; the distance must still be exact
+    s = trimesh.creation.icosphere(subdivisions=3)
+    c = trimesh.creation.cylinder(radius=0.01, height=10.0, sections=8)
+    v = np.concatenate([s.vertices, c.vertices])
+    f = np.concatenate([s.faces, c.faces + len(s.vertices)])
+    assert metrics.hausdorff(v, f, v, f, samples=5000) < 1e-9
+    sd = metrics.SurfaceDistance(v, f, samples=2000)
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(3000, 3)) * 0.7
+    brute = np.min([metrics.point_triangle_distance(p, *(np.repeat(v[t][None, k], len(p), 0) for k in range(3)))
+                    for t in f], axis=0)
+    np.testing.assert_allclose(sd.exact(p), brute, atol=1e-12)
+    assert np.all(sd(p) >= brute - 1e-12)
+    assert sd.max_distance(p) == pytest.approx(brute.max(), abs=1e-12)

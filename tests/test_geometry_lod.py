@@ -73,3 +73,24 @@ def test_bench_small_runs_every_method_isolated():
     for r in res["runs"]:
         assert not r["crashed"], r
         assert r["triangles"] <= 0.2 * 1280 and r["error_m"] < 0.1
+
+
+def test_cad_like_touching_parts_reduced_within_budget():
+    # CAD-like: a core and thin sheds as separate touching closed parts (not welded)
+    parts, off = [], 0
+    core_v, core_f = lod._revolve(np.array([[0.04, 0.0], [0.04, 1.0]]), 96)
+    parts.append((core_v, core_f))
+    for k in range(5):
+        z0 = 0.1 + 0.18 * k
+        prof = np.array([[0.04, z0], [0.12, z0 + 0.01], [0.12, z0 + 0.014], [0.04, z0 + 0.03]])
+        t = np.linspace(0, 1, 24)
+        prof = np.stack([np.interp(t, np.linspace(0, 1, 4), prof[:, 0]), np.interp(t, np.linspace(0, 1, 4), prof[:, 1])], 1)
+        parts.append(lod._revolve(prof, 96))
+    v = np.concatenate([p[0] for p in parts])
+    f = np.concatenate([p[1] + o for p, o in zip(parts, np.cumsum([0] + [len(p[0]) for p in parts[:-1]]))])
+    ids = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
+    budget = 0.003
+    r = lod.simplify_checked(v, f, budget, samples=20000, parts=ids)
+    assert len(r.faces) < len(f) // 2
+    assert r.valid and r.error_m <= budget
+    assert metrics.hausdorff(v, f, r.vertices, r.faces, samples=20000) <= budget

@@ -2,7 +2,7 @@
 whole scene as ONE file (the study's rejected monolithic approach), and how long
 Blender takes to load each result. Not imported by the pipeline; run as
 
-    python -m pipeline.bench.blender_script assemble BUILT OUTDIR REPEATS
+    python -m pipeline.bench.blender_script assemble BUILT OUTDIR REPEATS glb|usd
     python -m pipeline.bench.blender_script load FILE
     python -m pipeline.bench.blender_script reexport BUILT ASSET OUTDIR STEPS
 
@@ -11,7 +11,7 @@ and prints one line `BENCH_JSON {...}`.
 assemble: import each used model's .glb once (LOD0, as authored), then one linked
 duplicate of its object tree per placement (objects share mesh data, as Alt+D does)
 at the placement's ENU pose from scene/placements.json, plus the terrain; then time
-`export_scene.gltf` (GLB) and `wm.usd_export` of the whole scene.
+`export_scene.gltf` (GLB) or `wm.usd_export` of the whole scene (one format per run).
 load: a fresh Blender imports FILE (glTF or USD, default options); seconds and this
 process's peak RSS (`load none` gives bpy's own baseline).
 reexport: the study's runtime: at every state step, change the indicator (the
@@ -53,7 +53,7 @@ def _duplicate(bpy, objects: list, collection) -> dict:
     return mapping
 
 
-def assemble(built: Path, outdir: Path, repeats: int) -> dict:
+def assemble(built: Path, outdir: Path, repeats: int, fmt: str = "glb") -> dict:
     import bpy
     from mathutils import Matrix
 
@@ -82,18 +82,20 @@ def assemble(built: Path, outdir: Path, repeats: int) -> dict:
     bpy.context.view_layer.update()
     assemble_s = time.perf_counter() - t0
     outdir.mkdir(parents=True, exist_ok=True)
-    glb, usd = outdir / "blender_monolithic.glb", outdir / "blender_monolithic.usdc"
-    t_glb, t_usd = [], []
+    # one format per process: Blender's USD export of the sample took > 5 min and > 8 GB,
+    # so the driver caps it separately without losing the glTF figures
+    dst = outdir / ("blender_monolithic.glb" if fmt == "glb" else "blender_monolithic.usdc")
+    times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        bpy.ops.export_scene.gltf(filepath=str(glb), export_format="GLB")
-        t_glb.append(time.perf_counter() - t0)
-        t0 = time.perf_counter()
-        bpy.ops.wm.usd_export(filepath=str(usd))
-        t_usd.append(time.perf_counter() - t0)
+        if fmt == "glb":
+            bpy.ops.export_scene.gltf(filepath=str(dst), export_format="GLB")
+        else:
+            bpy.ops.wm.usd_export(filepath=str(dst))
+        times.append(time.perf_counter() - t0)
     return {"assemble_s": assemble_s, "objects": len(bpy.data.objects), "meshes": len(bpy.data.meshes),
-            "placements": len(record["placements"]), "export_gltf_s": t_glb, "export_usd_s": t_usd,
-            "glb": str(glb), "glb_bytes": glb.stat().st_size, "usd": str(usd), "usd_bytes": usd.stat().st_size,
+            "placements": len(record["placements"]), "export_s": times, "file": str(dst),
+            "bytes": dst.stat().st_size, "maxrss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
             "blender": bpy.app.version_string}
 
 
@@ -141,7 +143,7 @@ def reexport(built: Path, asset: str, outdir: Path, steps: int) -> dict:
 if __name__ == "__main__":
     mode, *args = sys.argv[1:]
     if mode == "assemble":
-        _emit(assemble(Path(args[0]), Path(args[1]), int(args[2])))
+        _emit(assemble(Path(args[0]), Path(args[1]), int(args[2]), args[3] if len(args) > 3 else "glb"))
     elif mode == "load":
         _emit(load(args[0]))
     elif mode == "reexport":

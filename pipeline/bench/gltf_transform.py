@@ -62,12 +62,7 @@ def _our_lod_seconds(built: Path, asset: str) -> float | None:
         timings = state["tasks"][f"asset:{asset}"]["result"]["timings"]
     except (OSError, KeyError, json.JSONDecodeError):
         return None
-    lod = [v for k, v in timings.items() if "lod" in k.lower()]
-    if lod:
-        return float(sum(lod))
-    # steps without a __name__ of their own all record as "step", the last one (the
-    # LOD chain, last in builder.tasks.asset_steps) overwriting the others
-    return float(timings["step"]) if "step" in timings else None
+    return float(timings["lod"]) if "lod" in timings else None
 
 
 def simplify_models(ctx: Context, built: Path, work: Path) -> list[dict]:

@@ -290,18 +290,19 @@ class SurfaceDistance:
             upper[over] = self.exact(np.asarray(points)[over], upper[over])
         return upper
 
-    def max_distance(self, points: np.ndarray) -> float:
+    def max_distance(self, points: np.ndarray, upper: np.ndarray | None = None) -> float:
         """The largest true distance from `points: (k, 3)` to the surface.
 
         Candidate distances bound each point from above; points are verified exactly
         in order of their bound until no remaining bound can beat the verified
-        maximum. The bounds are nearly always exact, so few points need verifying."""
+        maximum. The bounds are nearly always exact, so few points need verifying.
+        `upper: (k,)` upper bounds already known (`__call__`, `distances_above`)."""
         if len(points) == 0:
             return 0.0
         if self.tree is None:
             return float("inf")
         points = np.asarray(points, dtype=np.float64)
-        upper = self(points)
+        upper = self(points) if upper is None else np.asarray(upper, dtype=np.float64)
         order = np.argsort(-upper, kind="stable")
         best, start, batch = 0.0, 0, 256
         while start < len(order) and upper[order[start]] > best:
