@@ -550,9 +550,13 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
     scale = max(link_scale, 1e-12)
     chains = {v.name: [v.mesh] for v in group}
     errors = np.zeros(len(budgets))
+    prev = None
     for i, b in enumerate(budgets):
         r = simplify_checked(vertices, faces, b / scale, options.method, options.iterations, options.samples,
                              normals=normals, parts=parts_id)
+        if prev is not None and len(prev.faces) <= len(r.faces):
+            r = prev  # the finer level's mesh is coarser and within this larger budget too
+        prev = r
         errors[i] = r.error_m * scale
         if r.faces is faces or len(group) == 1 and r.kept is None:
             for v in group:
