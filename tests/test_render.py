@@ -44,7 +44,32 @@ def test_exposure_clamps_at_night_and_sensor_saturates():
     dark = np.full((8, 8, 3), 1e-4, np.float32)
     assert r.metered_gain(dark, r.PhoneCamera()) == r.PhoneCamera().gain_max
     assert (r.develop(dark, r.PhoneCamera().gain_max, 0.0) < 30).all()  # night stays dark
-    assert (r.develop(np.ones((2, 2, 3)), 2.0, 0.0) == 255).all()
+    assert (r.develop(np.ones((8, 8, 3)), 2.0, 0.0) == 255).all()
+
+
+def test_white_balance_neutralises_a_tint_and_keeps_luminance():
+    tinted = np.ones((16, 16, 3), np.float32) * np.array([0.5, 0.7, 1.0], np.float32)
+    wb = r.metered_white_balance(tinted, r.PhoneCamera())
+    out = tinted[0, 0] * wb
+    assert out[0] == pytest.approx(out[1], rel=1e-6) == pytest.approx(out[2], rel=1e-6)
+    assert r.luminance(wb[None, :])[0] == pytest.approx(1.0)
+
+
+def test_isp_noise_reduction_removes_salt_and_pepper():
+    rng = np.random.default_rng(1)
+    flat = np.full((48, 64, 3), 0.2, np.float32)
+    flat[rng.random((48, 64)) < 0.05] = 0.0  # dead samples of a 16-spp path tracer
+    raw = r.develop(flat, 1.0, 0.0, cam=r.PhoneCamera(denoise=0.0))
+    clean = r.develop(flat, 1.0, 0.0, cam=r.PhoneCamera())
+    assert (raw < 80).mean() > 0.03 and (clean < 80).mean() < 0.002
+
+
+def test_ray_box_and_blocking():
+    pose = np.eye(4)
+    lo, hi = np.array([-1.0, -1.0, 0.0]), np.array([1.0, 1.0, 2.0])
+    assert r._ray_hits_box(np.array([-5.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), 10.0, pose, lo, hi)
+    assert not r._ray_hits_box(np.array([-5.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0]), 3.0, pose, lo, hi)
+    assert not r._ray_hits_box(np.array([-5.0, 0.0, 3.0]), np.array([1.0, 0.0, 0.0]), 10.0, pose, lo, hi)
 
 
 def test_veil_needs_the_sun_in_front_and_visible():
@@ -78,8 +103,8 @@ def test_cull_keeps_what_is_seen_and_shadowing():
 @needs_build
 def test_frames_labels_and_determinism(tmp_path):
     site = r.load_site(BUILD)
-    shots = [s for _, s in r.study_shots(site)]
-    night, noon = shots[1], shots[4]
+    shots = dict(r.study_shots(site))
+    night, noon = shots["midnight"], shots["early_morning"]  # the white dial in direct sun
     a = r.render_shots(site, [noon], tmp_path / "a", cam=TINY, seed=7)[0]
     b = r.render_shots(site, [noon], tmp_path / "b", cam=TINY, seed=7)[0]
     assert a["sha256"] == b["sha256"] and np.array_equal(a["rgb"], b["rgb"])
@@ -108,9 +133,29 @@ def test_study_table(tmp_path):
     r.render_study(tmp_path, cam=TINY)
     report = json.loads((tmp_path / "reports" / "study.json").read_text())
     names = [c["condition"] for c in report["conditions"]]
-    assert names == ["early_night", "midnight", "late_night", "early_morning", "solar_noon", "late_afternoon"]
+    # A day's order from the first light in which the pointer is visible (H_ref).
+    assert names == ["early_morning", "solar_noon", "late_afternoon", "early_night", "midnight", "late_night"]
+    assert report["target"] == "RE-B3"
     for c in report["conditions"]:
         assert 0.0 <= c["S"] <= 1.0 and c["C"] >= 0.0
         assert (tmp_path / "reports" / c["image"]).is_file()
-    assert report["conditions"][1]["S"] == 0.0
+    by = {c["condition"]: c for c in report["conditions"]}
+    assert by["early_morning"]["H"] == 1.0 and by["early_morning"]["H_true"] == 1.0
+    assert by["midnight"]["S"] == 0.0 and by["late_night"]["S"] == 0.0
+    assert by["late_afternoon"]["veil"] > 0.0 and by["late_afternoon"]["S"] > 0.5  # glare
+    assert by["solar_noon"]["S"] < 0.2
     assert "late_afternoon" in (tmp_path / "reports" / "study.html").read_text()
+
+
+@needs_build
+def test_study_viewpoint_faces_the_late_sun_with_a_clear_view():
+    """Bank B's gauges face ENE: the study camera looks WSW, the late sun within ~25 deg
+    of its axis and not hidden by a built model."""
+    site = r.load_site(BUILD)
+    shots = dict(r.study_shots(site))
+    late = shots["late_afternoon"]
+    axis = -late.cam_pose[:3, 2]
+    assert math.degrees(math.acos(float(axis @ late.sun_dir))) < 25.0
+    assert not r._blocked(site, late.cam_pose[:3, 3], late.sun_dir, 300.0)
+    centre, normal = r.dial_world(site.pose(site.placement(r.STUDY_TARGET)))
+    assert float(-axis @ normal) > math.cos(r.STUDY_MAX_OBLIQUITY) - 1e-9

@@ -8,7 +8,10 @@ pose and oil-column shape weights from the state.
 
 The phone camera is modelled outside Blender, on the linear (scene-referred) render:
 
-    pixel = sRGB(clip(gain * (radiance + veil), 0, 1))
+    pixel = NR(sRGB(clip(gain * (wb * radiance + veil), 0, 1)))
+
+- wb: grey-world auto white balance, metered with the exposure; NR: the phone ISP's
+  noise reduction (3x3 median + non-local means; saturated areas stay at 255).
 
 - gain: exposure locked once per scene (a condition, or a scenario) by centre-weighted
   metering of a first render to a mean of 0.18, clamped to the phone's longest exposure
@@ -56,14 +59,15 @@ class PhoneCamera:
     a smudged cover glass, not a device measurement.
     """
 
-    metering_target: float = 0.18
+    metering_target: float = 0.40
     gain_max: float = 60.0
     gain_min: float = 1e-5
-    veil_k: float = 0.05
+    veil_k: float = 0.15
     veil_width: float = 0.35
     width: int = 320
     height: int = 240
     samples: int = 16
+    denoise: float = 10.0  # ISP noise reduction (3x3 median, then OpenCV NL-means h); 0 = off
 
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
@@ -97,9 +101,36 @@ def veil_radiance(sun_dir: np.ndarray, view_axis: np.ndarray, dni: float, visibl
     return cam.veil_k * dni * math.exp(-((theta / cam.veil_width) ** 2))
 
 
-def develop(linear_rgb: np.ndarray, gain: float, veil: float) -> np.ndarray:
-    """(h, w, 3) linear radiance -> (h, w, 3) uint8 sRGB (RGB order)."""
-    return np.round(srgb_encode(gain * (linear_rgb + veil)) * 255.0).astype(np.uint8)
+def metered_white_balance(linear_rgb: np.ndarray, cam: PhoneCamera) -> np.ndarray:
+    """Grey-world auto white balance with the metering's centre weights: per-channel
+    gains (luminance-neutral, each within [1/4, 4]) that make the weighted mean grey,
+    as a phone does under a blue night sky or sodium-coloured floodlights."""
+    h, w = linear_rgb.shape[:2]
+    yy, xx = np.mgrid[0:h, 0:w]
+    weight = np.exp(-(((xx - w / 2) / (0.35 * w)) ** 2 + ((yy - h / 2) / (0.35 * h)) ** 2))
+    mean = (linear_rgb * weight[..., None]).sum(axis=(0, 1)) / weight.sum()
+    if not (mean > 0).all():
+        return np.ones(3)
+    wb = np.clip(mean.mean() / mean, 0.25, 4.0)
+    return wb / float(luminance(wb[None, :])[0])
+
+
+def develop(linear_rgb: np.ndarray, gain: float, veil: float, wb=None, cam: PhoneCamera | None = None) -> np.ndarray:
+    """(h, w, 3) linear radiance -> (h, w, 3) uint8 sRGB (RGB order): white balance,
+    exposure gain, veiling glare, sensor clip, sRGB, then the phone ISP's noise
+    reduction (non-local means; it also stands in for the many frames a phone merges,
+    where the renderer has 16 samples)."""
+    wb = np.ones(3) if wb is None else np.asarray(wb, float)
+    out = np.round(srgb_encode(gain * (linear_rgb * wb + veil)) * 255.0).astype(np.uint8)
+    strength = (cam or PhoneCamera()).denoise
+    if strength > 0:
+        import cv2
+
+        out = cv2.medianBlur(np.ascontiguousarray(out), 3)  # path-tracing salt and pepper first
+        clipped = (out == 255).all(axis=-1)  # a saturated area stays saturated (not a firefly)
+        out = cv2.fastNlMeansDenoisingColored(out, None, strength, strength, 5, 15)
+        out[clipped] = 255
+    return out
 
 
 # --- camera geometry -----------------------------------------------------------------
@@ -144,10 +175,13 @@ DIAL_RADIUS = 0.15 * 1.12  # the bezel's outer radius
 POINTER = "gauge_tank_pointer"
 
 
-def dial_outline(model_pose: np.ndarray, n: int = 32) -> np.ndarray:
+FACE_RADIUS = 0.15  # the dial face inside the bezel
+
+
+def dial_outline(model_pose: np.ndarray, n: int = 32, radius: float = DIAL_RADIUS) -> np.ndarray:
     """(n, 3) world points on the bezel's rim (the dial lies in the model XZ plane)."""
     a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
-    local = DIAL_CENTER + DIAL_RADIUS * np.c_[np.cos(a), np.zeros(n), np.sin(a)]
+    local = DIAL_CENTER + radius * np.c_[np.cos(a), np.zeros(n), np.sin(a)]
     return local @ model_pose[:3, :3].T + model_pose[:3, 3]
 
 
@@ -224,6 +258,7 @@ class Site:
     origin: tuple[float, float, float]
     date: str
     inspection: dict[str, dict] = field(default_factory=dict)  # name -> {enu, target}
+    terrain: str | None = None  # the terrain package (placed at the ENU origin)
 
     def placement(self, tag: str) -> dict:
         for p in self.placements:
@@ -268,6 +303,9 @@ def load_site(build: Path, sources: Path | None = None) -> Site:
     o = data["origin"]
     origin = (o["latitude_deg"], o["longitude_deg"], o["height_m"])
     site = Site(build, data["placements"], manifests, origin, "2025-03-20")
+    terrain = data.get("terrain")
+    if terrain and (build / "models" / terrain / f"{terrain}.glb").is_file():
+        site.terrain = terrain
     sources = Path(sources) if sources else Path(__file__).resolve().parents[2] / "sources"
     if (sources / "site.toml").is_file():
         _add_site_toml(site, sources / "site.toml")
@@ -333,11 +371,13 @@ class _Blender:
     NIGHT_AMBIENT = 2e-4  # W/m2/sr: airglow and light pollution
     MOON = {"elevation": math.radians(50.0), "azimuth": math.radians(80.0), "irradiance": 2.5e-3}
     LAMP_W = 5000.0  # W (radiant) per floodlight head, spot 70 degrees
+    THREADS = 2
 
     def __init__(self, site: Site, cam: PhoneCamera, seed: int):
         import bpy
 
         self.bpy, self.site, self.cam = bpy, site, cam
+        self.lamps: list = []
         bpy.ops.wm.read_factory_settings(use_empty=True)
         s = self.scene = bpy.context.scene
         s.render.engine = "CYCLES"
@@ -347,8 +387,25 @@ class _Blender:
         s.cycles.use_animated_seed = False
         s.cycles.use_denoising = False  # keeps pixels a pure function of the seed
         s.cycles.use_adaptive_sampling = False
+        # Speed (bench_render): the image is 320x240 at 16 samples, so what matters is the
+        # cost per sample. Small tiles keep both threads busy (one 2048 tile leaves one
+        # idle at the end); the path stops after a few bounces (a grey yard converges
+        # fast; deeper paths only add noise at 16 samples); no caustics; a flat light
+        # list (the light tree pays off with hundreds of lights, not ten); the floodlights
+        # are off while the sun is up (set_shot); Principled uses single-scatter GGX.
         s.render.threads_mode = "FIXED"
-        s.render.threads = 2
+        s.render.threads = self.THREADS
+        s.cycles.use_auto_tile = True
+        s.cycles.tile_size = 64
+        s.cycles.max_bounces = 4
+        s.cycles.diffuse_bounces = 2
+        s.cycles.glossy_bounces = 2
+        s.cycles.transmission_bounces = 2
+        s.cycles.volume_bounces = 0
+        s.cycles.transparent_max_bounces = 8  # glass in front of a dial, oil tubes
+        s.cycles.caustics_reflective = False
+        s.cycles.caustics_refractive = False
+        s.cycles.use_light_tree = False
         s.render.resolution_x, s.render.resolution_y = cam.width, cam.height
         s.render.resolution_percentage = 100
         s.render.use_persistent_data = True  # keep the BVH between frames: only poses change
@@ -421,11 +478,24 @@ class _Blender:
         self.bpy.context.view_layer.update()
         self.roots[tag], self.objects[tag] = root, objs
 
+    def load_terrain(self) -> None:
+        if self.site.terrain and "__terrain__" not in self.roots:
+            root, objs = self._import(self.site.build / "models" / self.site.terrain / f"{self.site.terrain}.glb")
+            self.roots["__terrain__"], self.objects["__terrain__"] = root, objs
+
     def _import(self, glb: Path):
         bpy = self.bpy
         before = set(bpy.data.objects)
         bpy.ops.import_scene.gltf(filepath=str(glb))
         new = [o for o in bpy.data.objects if o not in before]
+        glass = {m.name for m in {sl.material for o in new for sl in o.material_slots if sl.material is not None}
+                 if _tune_material(m)}
+        for o in new:
+            # A thin pane passes ~92 % of the light: shadow rays ignore it, so the dial
+            # behind gets direct light (through a transparent shader they would be
+            # sampled less well: twice the noise, half the light at 16 samples).
+            if any(sl.material is not None and sl.material.name in glass for sl in o.material_slots):
+                o.visible_shadow = False
         root = next(o for o in new if o.parent is None)
         objs = {_base_name(o.name): o for o in new}
         return root, objs
@@ -465,6 +535,7 @@ class _Blender:
                     ob = bpy.data.objects.new(light.name, light)
                     ob.matrix_world = _matrix(bpy, look_at(pose[:3, 3] + beam * 0.05, pose[:3, 3] + beam))
                     self.scene.collection.objects.link(ob)
+                    self.lamps.append(ob)
 
     # -- per frame
     def set_shot(self, shot: Shot, pointer_binding: dict | None) -> None:
@@ -506,9 +577,22 @@ class _Blender:
         self.sun.matrix_world = _matrix(bpy, look_at(shot.sun_dir, (0.0, 0.0, 0.0)))
         moon = self.MOON
         self.moon.hide_render = up
+        for lamp in self.lamps:  # photocell floodlights: on from sunset to sunrise
+            lamp.hide_render = up
         self.moon.data.energy = moon["irradiance"]
         mdir = sun_model.direction_enu(moon["elevation"], moon["azimuth"])
         self.moon.matrix_world = _matrix(bpy, look_at(mdir, (0.0, 0.0, 0.0)))
+
+    def pointer_rows(self, tag: str, cam_pose: np.ndarray, k: dict) -> float | None:
+        """Row extent (px) of the pointer's projected vertices: the true H numerator."""
+        ob = self.objects.get(tag, {}).get(POINTER)
+        if ob is None:
+            return None
+        self.bpy.context.view_layer.update()
+        m = np.array(ob.matrix_world)
+        v = np.array([tuple(x.co) for x in ob.data.vertices], float)
+        uv = project(v @ m[:3, :3].T + m[:3, 3], cam_pose, k)
+        return float(np.nanmax(uv[:, 1]) - np.nanmin(uv[:, 1]))
 
     def sun_visible(self, eye: np.ndarray, sun_dir: np.ndarray) -> bool:
         """Is the sun unobstructed from the lens (for the veiling glare)?"""
@@ -535,16 +619,34 @@ class _Blender:
         return px.reshape(h, w, 4)[::-1, :, :3].copy()
 
 
-def _clear_glass(mat) -> None:
-    """A see-through material (alpha < 1, as glTF carries gauge glass) as clear glass:
-    Fresnel-weighted gloss over full transparency. Principled with alpha keeps a diffuse
-    share that greys the dial out, and refraction would cast black shadows without
-    caustics; transparent shadows let the sun reach the dial, as through real glass."""
+GLASS_ALPHA_MAX = 0.5  # glTF alpha at or below which a material is a window, not a tint
+
+
+def _tune_material(mat) -> bool:
+    """Imported glTF materials for Cycles: window glass as clear glass (below); every
+    Principled BSDF with single-scatter GGX (multiscatter costs a third of the frame
+    for energy a 16-sample frame cannot show)."""
     if not mat.node_tree:
-        return
+        return False
+    for n in mat.node_tree.nodes:
+        if n.type == "BSDF_PRINCIPLED":
+            n.distribution = "GGX"
+    return _clear_glass(mat)
+
+
+def _clear_glass(mat) -> bool:
+    """A window material (glTF alpha <= GLASS_ALPHA_MAX, as the gauge glass's 0.25) as a
+    thin clear pane of IOR 1.5, roughness 0: Fresnel-weighted specular reflection (4 %
+    head-on, more at grazing angles) over full transmission without refraction offset
+    (thin-walled). The glTF alpha blend keeps a 75 % diffuse share that greys the dial
+    and pointer out; a refracting solid would need caustics to let the sun through.
+    Transparent shadows let the sun reach the dial, as through real glass. Tinted
+    see-through materials (the oil column, alpha 0.9) stay as imported."""
+    if not mat.node_tree:
+        return False
     bsdf = next((n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
-    if bsdf is None or bsdf.inputs["Alpha"].is_linked or bsdf.inputs["Alpha"].default_value >= 1.0:
-        return
+    if bsdf is None or bsdf.inputs["Alpha"].is_linked or bsdf.inputs["Alpha"].default_value > GLASS_ALPHA_MAX:
+        return False
     nt = mat.node_tree
     rough = bsdf.inputs["Roughness"].default_value
     for n in list(nt.nodes):
@@ -554,11 +656,12 @@ def _clear_glass(mat) -> None:
     fresnel, mix = nt.nodes.new("ShaderNodeFresnel"), nt.nodes.new("ShaderNodeMixShader")
     fresnel.inputs["IOR"].default_value = 1.5
     clear, gloss = nt.nodes.new("ShaderNodeBsdfTransparent"), nt.nodes.new("ShaderNodeBsdfGlossy")
-    gloss.inputs["Roughness"].default_value = rough
+    gloss.inputs["Roughness"].default_value = 0.0 if rough <= 0.1 else rough
     nt.links.new(fresnel.outputs[0], mix.inputs[0])
     nt.links.new(clear.outputs[0], mix.inputs[1])
     nt.links.new(gloss.outputs[0], mix.inputs[2])
     nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    return True
 
 
 def _base_name(name: str) -> str:
@@ -685,19 +788,22 @@ def _pointer_binding(site: Site, tag: str) -> dict | None:
 
 
 def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamera, seed: int,
-                 gain: float | None = None, names: list[str] | None = None) -> list[dict]:
-    """Render shots into folder/<name>.png + <name>.json; one scene, exposure locked at
-    the first shot unless `gain` is given. Returns one record per frame."""
+                 gain: float | None = None, names: list[str] | None = None, meter_each: bool = False) -> list[dict]:
+    """Render shots into folder/<name>.png + <name>.json; one scene (loaded once, kept
+    between frames), exposure locked at the first shot unless `gain` is given or
+    `meter_each` (the phone re-meters every shot). Returns one record per frame."""
     folder.mkdir(parents=True, exist_ok=True)
+    lock = (gain, (1.0, 1.0, 1.0)) if gain is not None else None
     bl = _Blender(site, cam, seed)
     try:
         _populate(bl, site, shots)
         records = []
         for i, shot in enumerate(shots):
             records.append(_one(bl, site, shot, folder, (names or [])[i] if names else f"frame_{i:04d}",
-                                cam, gain if gain is not None else None))
-            if gain is None:
-                gain = records[-1]["labels"]["camera"]["exposure_gain"]
+                                cam, lock))
+            if lock is None and not meter_each:
+                c = records[-1]["labels"]["camera"]
+                lock = (c["exposure_gain"], c["white_balance"])
         return records
     finally:
         bl.close()
@@ -716,31 +822,38 @@ def _populate(bl: _Blender, site: Site, shots: list[Shot]) -> None:
         wanted |= {it["tag"] for it in cull(spheres, shot.cam_pose, k, shot.lens.near, far, sun)}
     for tag in sorted(wanted):
         bl.load(tag)
+    bl.load_terrain()  # the ground: shadows, bounce light, what the gauge glass reflects
     centres = [site.pose(site.placement(t))[:3, 3] for t in {s.target for s in shots}]
     poles = [p["tag"] for p in site.placements if p["asset"] == "lighting_pole" and p["asset"] in site.manifests
              and min(np.linalg.norm(np.array(p["enu"]) - c) for c in centres) < 120.0]
     bl.add_lamps(sorted(poles))
 
 
-def _one(bl: _Blender, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, gain: float | None) -> dict:
+def _one(bl: _Blender, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
+    """One frame; `lock` = (gain, white balance) of a locked exposure, or None to meter."""
     binding = _pointer_binding(site, shot.target)
     bl.set_shot(shot, binding)
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
     t0 = time.perf_counter()
     linear = bl.render()
     seconds = time.perf_counter() - t0
-    if gain is None:
-        gain = metered_gain(linear, cam)
+    if lock is None:
+        gain, wb = metered_gain(linear, cam), metered_white_balance(linear, cam)
+    else:
+        gain, wb = lock[0], np.asarray(lock[1], float)
     view_axis = -shot.cam_pose[:3, 2]
     visible = shot.sun_elevation > 0 and bl.sun_visible(shot.cam_pose[:3, 3], shot.sun_dir)
     veil = veil_radiance(shot.sun_dir, view_axis, shot.dni, visible, cam)
-    rgb = develop(linear, gain, veil)
+    rgb = develop(linear, gain, veil, wb, cam)
     labels = frame_labels(shot, k, site, gain, veil, binding)
+    labels["pointer_rows_px"] = bl.pointer_rows(shot.target, shot.cam_pose, k)
+    labels["camera"]["white_balance"] = [float(v) for v in wb]
     labels["render_s"] = seconds
+    labels["frame_s"] = time.perf_counter() - t0  # render + develop (ISP)
     digest = _write_png(folder / f"{name}.png", rgb)
     labels["image"] = f"{name}.png"
     labels["sha256"] = digest
-    _write_json(folder / f"{name}.json", {k2: v for k2, v in labels.items() if k2 != "render_s"})
+    _write_json(folder / f"{name}.json", {k2: v for k2, v in labels.items() if k2 not in ("render_s", "frame_s")})
     return {"name": name, "image": f"{name}.png", "sha256": digest, "labels": labels, "rgb": rgb}
 
 
@@ -806,15 +919,18 @@ def _dataset_manifest(folder: Path, name: str, seed: int, cam: PhoneCamera, reco
 
 # --- the study ----------------------------------------------------------------------------------
 
-STUDY_TARGET = "RE-A1"
+STUDY_TARGET = "RE-B3"  # bank B faces ENE: its reader looks WSW, into the late sun
 STUDY_ZOOM = 45.0
 STUDY_DISTANCE_M = 25.0  # at 45x the 0.34 m dial spans about half of the frame's width
 STUDY_MAX_OBLIQUITY = math.radians(45.0)  # beyond, the glass's Fresnel reflection hides the dial
 STUDY_TZ = dt.timezone(dt.timedelta(hours=-3))
 # Local times on the site's date (sunrise ~05:40, sunset ~17:45): early night at the end of
-# civil twilight, late afternoon 40 min before sunset.
-CONDITIONS = (("early_night", "18:05"), ("midnight", "23:59"), ("late_night", "04:00"),
-              ("early_morning", "06:45"), ("solar_noon", None), ("late_afternoon", "17:05"))
+# civil twilight, late afternoon 40 min before sunset. The sequence runs in a day's
+# order from the first light in which the pointer is visible (the study's H_ref is its
+# first image): morning, noon, late afternoon, then the three night conditions.
+CONDITIONS = (("early_morning", "06:45"), ("solar_noon", None), ("late_afternoon", "17:05"),
+              ("early_night", "18:05"), ("midnight", "23:59"), ("late_night", "04:00"))
+LATE = "late_afternoon"
 
 
 def study_times(site: Site) -> list[tuple[str, dt.datetime]]:
@@ -833,27 +949,69 @@ def study_times(site: Site) -> list[tuple[str, dt.datetime]]:
     return out
 
 
+def _ray_hits_box(origin: np.ndarray, direction: np.ndarray, length: float, pose: np.ndarray,
+                  lo: np.ndarray, hi: np.ndarray) -> bool:
+    """Does the segment origin + t direction, t in [0, length], cross the box [lo, hi]
+    of the model at `pose` (slab test in the model frame)?"""
+    o = pose[:3, :3].T @ (origin - pose[:3, 3])
+    d = pose[:3, :3].T @ direction
+    t0, t1 = 0.0, length
+    for i in range(3):
+        if abs(d[i]) < 1e-12:
+            if o[i] < lo[i] or o[i] > hi[i]:
+                return False
+            continue
+        a, b = (lo[i] - o[i]) / d[i], (hi[i] - o[i]) / d[i]
+        t0, t1 = max(t0, min(a, b)), min(t1, max(a, b))
+        if t0 > t1:
+            return False
+    return True
+
+
+def _blocked(site: Site, origin: np.ndarray, direction: np.ndarray, length: float, skip: str = "") -> bool:
+    """Does a built placement's bounding box (other than `skip`) cut the segment?"""
+    for p in site.placements:
+        m = site.manifests.get(p["asset"])
+        if m is None or p["tag"] == skip or m.get("kind") == "terrain" or p["asset"].endswith("_terrain"):
+            continue
+        pose = site.pose(p)
+        if np.linalg.norm(pose[:3, 3] - origin) > length + 40.0:
+            continue
+        if _ray_hits_box(origin, direction, length, pose, np.array(m["bounds"][0]), np.array(m["bounds"][1])):
+            return True
+    return False
+
+
 def study_viewpoint(site: Site, late_sun: np.ndarray) -> np.ndarray:
     """The study's camera pose: STUDY_DISTANCE_M from the main-tank dial, at a phone's
     height (1.6 m above the reactor's level), turned from the dial's normal towards the
-    late-afternoon sun as far as STUDY_MAX_OBLIQUITY allows, so the low sun faces the
-    lens as much as the dial's orientation permits."""
-    centre, normal = dial_world(site.pose(site.placement(STUDY_TARGET)))
-    best, best_cos = None, -2.0
-    for a in np.linspace(-STUDY_MAX_OBLIQUITY, STUDY_MAX_OBLIQUITY, 141):
+    late-afternoon sun as far as STUDY_MAX_OBLIQUITY allows, so that the low sun faces
+    the lens as much as the dial's orientation permits, while the line of sight to the
+    dial and the sun itself stay clear of the built models' bounding boxes (a sun hidden
+    behind the reactor would make no glare)."""
+    p = site.placement(STUDY_TARGET)
+    centre, normal = dial_world(site.pose(p))
+    candidates = []
+    for a in np.linspace(-STUDY_MAX_OBLIQUITY, STUDY_MAX_OBLIQUITY, 91):
         c, s = math.cos(a), math.sin(a)
         u = np.array([c * normal[0] - s * normal[1], s * normal[0] + c * normal[1], 0.0])
         eye = centre + STUDY_DISTANCE_M * u
-        eye[2] = site.placement(STUDY_TARGET)["enu"][2] + 1.6
-        axis = (centre - eye) / np.linalg.norm(centre - eye)
-        if axis @ late_sun > best_cos:
-            best, best_cos = eye, float(axis @ late_sun)
-    return look_at(best, centre)
+        eye[2] = p["enu"][2] + 1.6
+        dist = float(np.linalg.norm(centre - eye))
+        axis = (centre - eye) / dist
+        if _blocked(site, eye, axis, dist - 1.0, skip=STUDY_TARGET):
+            continue
+        sun_clear = late_sun[2] > 0 and not _blocked(site, eye, late_sun, 300.0)
+        candidates.append((sun_clear, float(axis @ late_sun), -abs(a), eye))
+    if not candidates:
+        raise RuntimeError(f"no clear view of {STUDY_TARGET}'s gauge from {STUDY_DISTANCE_M} m")
+    best = max(candidates, key=lambda c: c[:3])
+    return look_at(best[3], centre)
 
 
 def study_shots(site: Site, *, tau_atm: float = sun_model.DEFAULT_TAU_ATM) -> list[tuple[str, Shot]]:
     """Six shots of the study (PAPER_NOTES.md): same camera, six instants; the tank level
-    follows the study's leak trace over the day so H has something to follow."""
+    follows the study's leak trace over the sequence so H has something to follow."""
     times = study_times(site)
     lat, lon = site.origin[0], site.origin[1]
     suns = []
@@ -861,7 +1019,7 @@ def study_shots(site: Site, *, tau_atm: float = sun_model.DEFAULT_TAU_ATM) -> li
         el, az = sun_model.ephemeris(lat, lon, when)
         e = math.radians(el)
         suns.append((e, math.radians(az), sun_model.irradiance(e, tau_atm)))
-    late = sun_model.direction_enu(suns[-1][0], suns[-1][1])
+    late = next(sun_model.direction_enu(e, a) for (n, _), (e, a, _) in zip(times, suns) if n == LATE)
     pose = study_viewpoint(site, late)
     lens = camera_model.lens(STUDY_ZOOM)
     shots = []
@@ -887,6 +1045,21 @@ def study_roi(record: dict) -> tuple[int, int, int, int]:
     return int(math.floor(x0)), int(math.floor(y0)), int(math.ceil(x1)), int(math.ceil(y1))
 
 
+def face_only(bgr_crop: np.ndarray, site: Site, shot: Shot, cam: PhoneCamera, offset) -> np.ndarray:
+    """The crop with everything outside the projected dial face set to a neutral grey
+    (neither red, white nor dark for the H masks)."""
+    import cv2
+
+    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
+    uv = project(dial_outline(site.pose(site.placement(shot.target)), 64, FACE_RADIUS * 0.97), shot.cam_pose, k)
+    poly = np.round(uv - np.asarray(offset, float)).astype(np.int32)
+    mask = np.zeros(bgr_crop.shape[:2], np.uint8)
+    cv2.fillPoly(mask, [poly], 1)
+    out = bgr_crop.copy()
+    out[mask == 0] = 128
+    return out
+
+
 def render_study(out, *, cam: PhoneCamera | None = None, sources: Path | None = None) -> Path:
     """`twin render --study`: the six conditions, metrics C, S, H on the gauge ROI,
     out/reports/study.html + study.json, frames in out/reports/study/."""
@@ -897,22 +1070,32 @@ def render_study(out, *, cam: PhoneCamera | None = None, sources: Path | None = 
     folder = out / "reports" / "study"
     seed = 20250920
     rows = []
-    h_ref = None
-    # One scene per condition: each locks its own exposure (the phone re-meters).
-    for name, shot in shots:
-        rec = render_shots(site, [shot], folder, cam=cam, seed=seed, names=[name])[0]
+    h_ref = true_ref = None
+    # One scene for the six conditions (loaded once, kept between frames); the phone
+    # re-meters at each condition.
+    records = render_shots(site, [s for _, s in shots], folder, cam=cam, seed=seed,
+                           names=[n for n, _ in shots], meter_each=True)
+    for (name, shot), rec in zip(shots, records):
         x0, y0, x1, y1 = study_roi(rec)
         crop = rec["rgb"][y0:y1, x0:x1, ::-1]
         m = measure(crop, h_ref)
+        # H on the dial face only: the box's corners hold bezel and its shadows, which the
+        # region's convex hull would otherwise take for pointer pixels.
+        m["extent_px"] = measure(face_only(crop, site, shot, cam, (x0, y0)), None)["extent_px"]
+        m["H"] = m["extent_px"] / h_ref if h_ref else 0.0
         if h_ref is None:
             h_ref = m["extent_px"] or None
             m["H"] = 1.0 if h_ref else 0.0
         lab = rec["labels"]
+        rows_px = lab.get("pointer_rows_px")
+        true_ref = true_ref or rows_px
+        h_true = rows_px / true_ref if rows_px and true_ref else None
         rows.append({"condition": name, "time": lab["time"], "image": f"study/{rec['image']}",
                      "sun_elevation_deg": lab["sun"]["elevation_deg"], "sun_azimuth_deg": lab["sun"]["azimuth_deg"],
                      "irradiance_w_m2": lab["sun"]["irradiance_w_m2"], "oil_level_tank": lab["oil_levels"]["oil_level_tank"],
                      "exposure_gain": lab["camera"]["exposure_gain"], "veil": lab["camera"]["veil"],
-                     "roi": [x0, y0, x1, y1], "C": m["C"], "S": m["S"], "H": m["H"], "render_s": lab["render_s"]})
+                     "roi": [x0, y0, x1, y1], "C": m["C"], "S": m["S"], "H": m["H"], "H_true": h_true,
+                     "render_s": lab["render_s"], "frame_s": lab["frame_s"]})
     report = {"target": STUDY_TARGET, "zoom": STUDY_ZOOM, "seed": seed, "h_ref_px": h_ref,
               "metrics_from": _metrics().__name__, "camera": cam.__dict__, "conditions": rows}
     (out / "reports").mkdir(parents=True, exist_ok=True)
@@ -921,45 +1104,64 @@ def render_study(out, *, cam: PhoneCamera | None = None, sources: Path | None = 
     return out / "reports" / "study.html"
 
 
+def _fmt(x) -> str:
+    return "-" if x is None else f"{x:.2f}"
+
+
 def _study_html(report: dict) -> str:
     import html
 
     head = "<tr><th>condition</th><th>time</th><th>sun el / az (deg)</th><th>G (W/m2)</th><th>oil %</th>" \
-           "<th>gain</th><th>C</th><th>S</th><th>H</th><th>frame</th></tr>"
+           "<th>gain</th><th>C</th><th>S</th><th>H</th><th>H true</th><th>frame</th></tr>"
     rows = "".join(
         f"<tr><td>{html.escape(r['condition'])}</td><td>{html.escape(r['time'])}</td>"
         f"<td>{r['sun_elevation_deg']:.1f} / {r['sun_azimuth_deg']:.1f}</td><td>{r['irradiance_w_m2']:.0f}</td>"
         f"<td>{r['oil_level_tank']:.0f}</td><td>{r['exposure_gain']:.3g}</td><td>{r['C']:.3f}</td>"
-        f"<td>{r['S']:.3f}</td><td>{r['H']:.2f}</td><td><img src=\"{html.escape(r['image'])}\" width=\"240\"></td></tr>"
+        f"<td>{r['S']:.3f}</td><td>{r['H']:.2f}</td><td>{_fmt(r['H_true'])}</td><td><img src=\"{html.escape(r['image'])}\" width=\"240\"></td></tr>"
         for r in report["conditions"])
     return ("<!doctype html><html><head><meta charset=\"utf-8\"><title>Gauge study</title>"
             "<style>body{font-family:sans-serif}td,th{padding:4px 8px;border-bottom:1px solid #ccc}</style></head>"
             f"<body><h1>Main-tank gauge of {html.escape(report['target'])} at {report['zoom']:g}x: six conditions</h1>"
             "<p>C: RMS contrast, S: share of grey levels above 240, H: pointer extent / first frame's "
-            f"(H_ref = {report['h_ref_px']} px), on the dial's fixed ROI.</p>"
+            f"(H_ref = {report['h_ref_px']} px), on the dial's fixed ROI; H true: the same ratio of the "
+            "pointer's projected geometry (what H should read while the pointer is visible). Conditions in "
+            "a day's order from the first light in which the pointer is visible.</p>"
             f"<table>{head}{rows}</table></body></html>\n")
 
 
 # --- benchmark -----------------------------------------------------------------------------------
 
 
-def bench_render(out="build", repeats: int = 5) -> dict:
-    """Seconds per 320x240 frame (16 samples) of the study's gauge close-up."""
+def bench_render(out="build", repeats: int = 5, threads: int | None = None) -> dict:
+    """Seconds per 320x240 frame (16 samples) of the study's gauge close-up at solar noon:
+    the scene is loaded once (load_s), then `repeats` frames re-render it with the
+    persistent data kept (render_s: Cycles alone; frame_s: with the phone's develop)."""
     site = load_site(Path(out))
     cam = PhoneCamera()
-    name, shot = study_shots(site)[4]  # solar noon
+    shot = dict(study_shots(site))["solar_noon"]
     bl = _Blender(site, cam, 1)
+    if threads:
+        bl.scene.render.threads = threads
     try:
         t0 = time.perf_counter()
         _populate(bl, site, [shot])
         bl.set_shot(shot, _pointer_binding(site, shot.target))
         load_s = time.perf_counter() - t0
-        times = []
+        times, frames = [], []
         for _ in range(repeats):
             t = time.perf_counter()
-            bl.render()
+            linear = bl.render()
             times.append(time.perf_counter() - t)
+            develop(linear, metered_gain(linear, cam), 0.0, metered_white_balance(linear, cam), cam)
+            frames.append(time.perf_counter() - t)
+        import bpy
+
+        objects = sum(o.type == "MESH" for o in bpy.data.objects)
+        lights = sum(o.type == "LIGHT" for o in bpy.data.objects)
     finally:
         bl.close()
-    return {"frame": f"{cam.width}x{cam.height} {cam.samples} spp, {name}", "load_s": load_s,
-            "median_s": statistics.median(times), "min_s": min(times), "max_s": max(times), "repeats": repeats}
+    return {"frame": f"{cam.width}x{cam.height} {cam.samples} spp, solar_noon, {STUDY_TARGET}", "load_s": load_s,
+            "loaded": sorted(t for t in bl.roots), "mesh_objects": objects, "lights": lights,
+            "threads": threads or _Blender.THREADS,
+            "median_s": statistics.median(times), "min_s": min(times), "max_s": max(times),
+            "frame_median_s": statistics.median(frames), "repeats": repeats}

@@ -100,6 +100,12 @@ BUS_B_Y = (32.0, 40.0, 48.0)
 BUS_A_Y = (146.0, 154.0, 162.0)
 REACTOR_BANKS = {0: "A", 2: "B"}  # diameter index -> bank letter (north line exits)
 REACTOR_Y = 194.0
+# Bank B turns 90 degrees: its gauges face plant +x (azimuth ~67 deg, ENE), so a reader
+# in front of them looks WSW, into the late-afternoon sun (the study's glare case).
+# Its row sits west of the diameter's exit (x 57..77, 10 m pitch) so that 25 m of flat
+# L1 ground (to x = 104) lies in front of RE-B3's gauge: the study's 45x close-up.
+REACTOR_B_X = (57.0, 67.0, 77.0)
+REACTOR_HEADING = {"A": 180.0, "B": 90.0}
 
 
 def reactor_gauge_point(x, y, heading_deg):
@@ -142,12 +148,14 @@ def yard_500(plan: Plan) -> None:
         if d in REACTOR_BANKS:
             bank = REACTOR_BANKS[d]
             for i in range(3):
-                # Gauges face the access road along the north fence (heading 180).
+                # Bank A's gauges face the access road along the north fence (heading
+                # 180); bank B's face east (heading 90).
                 tag = f"RE-{bank}{i + 1}"
-                plan.put("shunt_reactor", tag, "L1", xc + (i - 1) * 10.0, REACTOR_Y, 180.0, state=f"reactor_{bank}{i + 1}")
+                x = REACTOR_B_X[i] if bank == "B" else xc + (i - 1) * 10.0
+                plan.put("shunt_reactor", tag, "L1", x, REACTOR_Y, REACTOR_HEADING[bank], state=f"reactor_{bank}{i + 1}")
         plan.put("junction_box", f"CJ-D{d + 1}", "L1", xc + 15.0, 84.0, 90.0)
     buses(plan, "L1", {"B": BUS_B_Y, "A": BUS_A_Y}, x0=10.0, count=7, prefix="5")
-    for i, (x, y) in enumerate([(6, 12), (37, 12), (67, 12), (98, 12), (37, 98), (67, 98), (6, 120), (98, 120), (6, 190), (98, 200), (67, 196)]):
+    for i, (x, y) in enumerate([(6, 12), (37, 12), (67, 12), (98, 12), (37, 98), (67, 98), (6, 120), (98, 120), (6, 190), (98, 200), (62, 201)]):
         plan.put("lightning_mast", f"SPDA-1{i + 1:02d}", "L1", x, y)
     for i, (x, y) in enumerate([(37, 28), (67, 28), (37, 70), (67, 126), (37, 165), (67, 165), (6, 60), (98, 90)]):
         plan.put("lighting_pole", f"IL-1{i + 1:02d}", "L1", x, y, 90.0 if i % 2 else 0.0)
