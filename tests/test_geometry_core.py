@@ -101,11 +101,16 @@ def test_quaternion_180_degrees():
     assert np.allclose(np.abs(q), [0, 1, 0, 0], atol=1e-12)
 
 
-def test_point_triangle_distance_matches_trimesh():
+def test_surface_distance_matches_trimesh_far_from_origin():
+    mesh = trimesh.creation.annulus(r_min=0.2, r_max=0.5, height=0.3, sections=24)
     rng = np.random.default_rng(0)
-    p, a, b, c = (rng.normal(size=(3000, 3)) for _ in range(4))
-    cp = trimesh.triangles.closest_point(np.stack([a, b, c], 1), p)
-    np.testing.assert_allclose(metrics.point_triangle_distance(p, a, b, c), np.linalg.norm(p - cp, axis=1), atol=1e-12)
+    p = rng.normal(size=(3000, 3))
+    _, expected, _ = trimesh.proximity.closest_point(mesh, p)
+    offset = np.array([576000.0, 8595900.0, 48.0])  # UTM-sized coordinates
+    sd = metrics.SurfaceDistance(mesh.vertices + offset, mesh.faces)
+    d, face = sd.nearest(p + offset)
+    np.testing.assert_allclose(d, expected, atol=1e-9)
+    assert face.min() >= 0 and face.max() < len(mesh.faces)
 
 
 def test_hausdorff_sphere_vs_coarse_and_offset():
@@ -168,11 +173,11 @@ def test_surface_distance_exact_beside_crowding_parts():
     v = np.concatenate([s.vertices, c.vertices])
     f = np.concatenate([s.faces, c.faces + len(s.vertices)])
     assert metrics.hausdorff(v, f, v, f, samples=5000) < 1e-9
-    sd = metrics.SurfaceDistance(v, f, samples=2000)
+    sd = metrics.SurfaceDistance(v, f)
     rng = np.random.default_rng(3)
     p = rng.normal(size=(3000, 3)) * 0.7
-    brute = np.min([metrics.point_triangle_distance(p, *(np.repeat(v[t][None, k], len(p), 0) for k in range(3)))
-                    for t in f], axis=0)
-    np.testing.assert_allclose(sd.exact(p), brute, atol=1e-12)
-    assert np.all(sd(p) >= brute - 1e-12)
+    tris = v[f]
+    brute = np.min([np.linalg.norm(p - trimesh.triangles.closest_point(np.repeat(t[None], len(p), 0), p), axis=1)
+                    for t in tris], axis=0)
+    np.testing.assert_allclose(sd(p), brute, atol=1e-12)
     assert sd.max_distance(p) == pytest.approx(brute.max(), abs=1e-12)

@@ -85,9 +85,11 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
         upaxis=dae_asset.UP_AXIS.Z_UP,
         contributors=[dae_asset.Contributor(authoring_tool=_TOOL)],
     )
+    # COLLADA 1.4.1 types every name attribute xs:NCName: a CAD part called "10" would
+    # fail the schema, so names take the same safe spelling as ids
     ident = names.safe_name(node_name)
     arrays, inputs, sources = _sources(ident, mesh)
-    geom = dae_geometry.Geometry(doc, f"{ident}-mesh", node_name, sources)
+    geom = dae_geometry.Geometry(doc, f"{ident}-mesh", ident, sources)
     triset = geom.createTriangleSet(np.asarray(mesh.faces, dtype=np.int64).reshape(-1), inputs, "material0")
     geom.primitives.append(triset)
     doc.geometries.append(geom)
@@ -96,7 +98,7 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
     if material is not None:
         mat = _phong_material(doc, material)
         bindings.append(dae_scene.MaterialNode("material0", mat, inputs=[]))
-    node = dae_scene.Node(ident, children=[dae_scene.GeometryNode(geom, bindings)], name=node_name)
+    node = dae_scene.Node(ident, children=[dae_scene.GeometryNode(geom, bindings)], name=ident)
     scene = dae_scene.Scene("Scene", [node])
     doc.scenes.append(scene)
     doc.scene = scene
@@ -129,7 +131,7 @@ def _phong_material(doc, material: ir.Material):
         emission=p.emissive, ambient=p.ambient, diffuse=p.diffuse, specular=p.specular,
         shininess=p.shininess, transparency=material.alpha,
     )
-    mat = dae_material.Material(f"{ident}-material", material.name, effect)
+    mat = dae_material.Material(f"{ident}-material", ident, effect)
     doc.effects.append(effect)
     doc.materials.append(mat)
     return mat

@@ -35,7 +35,7 @@ import numpy as np
 from .. import ir
 from ..errors import UserError
 from . import clean as _clean
-from .metrics import SurfaceDistance, face_normals, one_sided_hausdorff, query_points, vertex_normals
+from .metrics import SurfaceDistance, face_normals, query_points, vertex_normals
 from .transform import linear_scale
 
 METHODS = ("meshoptimizer", "pymeshlab", "fast_simplification")
@@ -51,6 +51,9 @@ NO_GAIN = 0.95
 LOCK_SHARE = 0.8
 # More misses than this share of the measured points: lower the target, lock nothing.
 WIDESPREAD = 0.02
+# simplify+measure rounds per level at most, and the widest lock around one miss
+ITERATIONS = 10
+LOCK_NEIGHBOURS = 64
 
 
 # --- raw simplifiers: (vertices (n, 3), faces (m, 3)) -> (vertices, faces) -------------
@@ -146,40 +149,23 @@ def simplify_to_count(vertices: np.ndarray, faces: np.ndarray, target_faces: int
 
 
 def flipped_face_count(reference: SurfaceDistance, vertices: np.ndarray, faces: np.ndarray, tolerance: float) -> int:
-    """Faces of (vertices (n, 3), faces (m, 3)) that point against every nearby face of
-    the reference surface (the candidates of its centroid within `tolerance` of the
-    nearest one). Thin two-sided parts are never counted: either side agrees. Used for
-    simplifiers that move vertices; see `flipped_by_vertex_normals` for the others."""
+    """Faces of (vertices (n, 3), faces (m, 3)) that point against the reference
+    surface's nearest face, seen from their centroid and from `tolerance` out along
+    their own normal: a thin two-sided part (thinner than the tolerance) is never
+    counted, as from one of the two points the nearest face agrees. Used for
+    simplifiers that move vertices; see `flipped_by_fans` for the others."""
     if len(faces) == 0:
         return 0
     normals = face_normals(vertices, faces)
     centroids = vertices[faces].mean(axis=1)
-    cand, dist = reference.nearest_faces(centroids)
     ref_normals = face_normals(reference.vertices, reference.faces)
-    near = dist <= dist.min(axis=1, keepdims=True) + tolerance
-    dots = np.einsum("kcj,kj->kc", ref_normals[cand], normals)
-    best = np.where(near, dots, -np.inf).max(axis=1)
+    best = np.full(len(faces), -np.inf)
+    for points in (centroids, centroids + tolerance * normals):
+        _, nearest = reference.nearest(points)
+        best = np.maximum(best, np.einsum("kj,kj->k", ref_normals[nearest], normals))
     has_area = np.linalg.norm(normals, axis=1) > 0
     # below -0.2: clearly facing away, not a face standing across a crease
     return int(((best < -0.2) & has_area).sum())
-
-
-def flipped_by_vertex_normals(normals: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
-                              where: list | None = None) -> int:
-    """Faces whose normal points against all three of their corners' ORIGINAL vertex
-    normals (normals: (n, 3) of the unsimplified mesh; faces index its vertices, as
-    meshoptimizer's output does). A face that turned over in a collapse disagrees with
-    the surface it came from at every corner; one merely crossing a crease agrees with
-    at least one, and a thin part's other side is never consulted."""
-    if len(faces) == 0:
-        return 0
-    n = face_normals(vertices, faces)
-    dots = np.einsum("kj,kcj->kc", n, normals[faces])
-    has_area = np.linalg.norm(n, axis=1) > 0
-    flipped = (dots.max(axis=1) < -0.2) & has_area
-    if where is not None:  # the flipped faces' centroids, to lock around them
-        where.append(vertices[faces[flipped]].mean(axis=1))
-    return int(flipped.sum())
 
 
 def _vertex_fans(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -246,7 +232,7 @@ class _Judge:
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, samples: int):
         samples = int(np.clip(SAMPLES_PER_FACE * len(faces), MIN_SAMPLES, samples))
         self.vertices, self.faces, self.samples = vertices, faces, samples
-        self.reference = SurfaceDistance(vertices, faces, samples=samples)
+        self.reference = SurfaceDistance(vertices, faces)
         topo = _topology_faces(vertices, faces)
         self.non_manifold = _clean.non_manifold_edge_count(topo)
         # normals on the welded surface, so a UV seam does not split a corner's normal
@@ -297,16 +283,12 @@ class _Judge:
         queries = self.queries
         if kept is not None:  # a kept original vertex lies on both surfaces
             queries = queries[~np.isin(self.query_vertex, kept)]
-        target = SurfaceDistance(v, f, samples=self.samples)
+        target = SurfaceDistance(v, f, self.reference.origin)
         own = query_points(v, f, self.samples)
-        if threshold is None:
-            there = target.max_distance(queries)
-            back = self.reference.max_distance(own)
-        else:
-            d_there = target.distances_above(queries, threshold)
-            d_back = self.reference.distances_above(own, threshold)
-            there = target.max_distance(queries, d_there)
-            back = self.reference.max_distance(own, d_back)
+        d_there, d_back = target(queries), self.reference(own)
+        there = float(d_there.max(initial=0.0))
+        back = float(d_back.max(initial=0.0))
+        if threshold is not None:
             bad += [queries[d_there > threshold], own[d_back > threshold]]
             how_far += [d_there[d_there > threshold], d_back[d_back > threshold]]
         topo = _topology_faces(v, f)
@@ -321,8 +303,10 @@ class _Judge:
         return Simplified(v, f, kept, max(there, back), flips, added), where
 
 
-def _search_meshopt(judge: _Judge, budget: float, iterations: int) -> Simplified | None:
-    """Coarsest meshoptimizer result whose measurement is within budget.
+def _search_meshopt(judge: _Judge, budget: float, iterations: int,
+                    lock: np.ndarray | None = None) -> tuple[Simplified | None, np.ndarray]:
+    """Coarsest meshoptimizer result whose measurement is within budget, and the
+    vertex lock it ended with (`lock`: a finer level's, to start from).
 
     meshoptimizer's error is an area-weighted MEAN of squared distances to the planes
     around a vertex, so a vertex may slide off a narrow face (a bevel, a fin's rim, a
@@ -330,9 +314,11 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int) -> Simplified
     Hausdorff distance runs far above the target there, and only there. So: simplify
     at the budget, measure, lock the original vertices around every point that
     misses (too far either way, a flipped face, a new non-manifold edge) and simplify
-    again; each round keeps the reduction everywhere else."""
+    again; each round keeps the reduction everywhere else. A finer level's lock is a
+    good start: its trouble spots are this level's too, and starting there saves the
+    rounds that would find them again."""
     n = len(judge.faces)
-    lock = np.zeros(len(judge.vertices), dtype=bool)
+    lock = np.zeros(len(judge.vertices), dtype=bool) if lock is None else lock.copy()
     best, s = None, budget
     for round_ in range(iterations):
         v, f = _meshopt(judge.vertices, judge.faces, 0, s, lock)
@@ -354,11 +340,11 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int) -> Simplified
             where = where[judge.how_far > 2.0 * budget]
             if len(where) == 0:
                 continue
-        new = judge.near_vertices(where, 4 << round_)  # wider each round
+        new = judge.near_vertices(where, min(4 << round_, LOCK_NEIGHBOURS))  # wider each round
         if len(new) == 0 or lock[new].all():
             break
         lock[new] = True
-    return best
+    return best, lock
 
 
 def _search_count(judge: _Judge, budget: float, iterations: int, method: str) -> Simplified | None:
@@ -382,43 +368,59 @@ def _search_count(judge: _Judge, budget: float, iterations: int, method: str) ->
 
 
 def simplify_checked(vertices: np.ndarray, faces: np.ndarray, budget_m: float, method: str = "meshoptimizer",
-                     iterations: int = 6, samples: int = MEASURE_SAMPLES, normals: np.ndarray | None = None,
+                     iterations: int = ITERATIONS, samples: int = MEASURE_SAMPLES, normals: np.ndarray | None = None,
                      parts: np.ndarray | None = None) -> Simplified:
-    """The coarsest checked simplification of a CLEAN mesh within `budget_m` (metres).
+    """The coarsest checked simplification of a CLEAN mesh within `budget_m` (metres):
+    `simplify_levels` with one budget."""
+    return simplify_levels(vertices, faces, (budget_m,), method, iterations, samples, normals, parts)[0]
 
-    vertices: (n, 3) float64, faces: (m, 3) int. When nothing coarser passes, the input
-    itself comes back (error 0): a level never exceeds its budget and never vanishes.
-    meshoptimizer runs on the position-welded surface (CAD patches and UV/normal seams
-    duplicate vertices; unwelded, every seam is a border the simplifier tears open),
-    then each new corner goes back to the original vertex of the same place whose
-    normal (`normals: (n, 3)`, optional) best matches the new face, so crisp edges and
-    UVs survive. `parts: (n,)` ids keep separate parts from welding together.
+
+def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: str = "meshoptimizer",
+                    iterations: int = ITERATIONS, samples: int = MEASURE_SAMPLES, normals: np.ndarray | None = None,
+                    parts: np.ndarray | None = None) -> list[Simplified]:
+    """The coarsest checked simplification of a CLEAN mesh within each of the
+    ascending `budgets_m` (metres), one per budget, each no finer than the one before.
+
+    vertices: (n, 3) float64, faces: (m, 3) int. When nothing coarser passes, the finer
+    level (at first the input itself, error 0) comes back: a level never exceeds its
+    budget and never vanishes. meshoptimizer runs on the position-welded surface (CAD
+    patches and UV/normal seams duplicate vertices; unwelded, every seam is a border
+    the simplifier tears open), then each new corner goes back to the original vertex
+    of the same place whose normal (`normals: (n, 3)`, optional) best matches the new
+    face, so crisp edges and UVs survive. `parts: (n,)` ids keep separate parts from
+    welding together. The mesh is welded and indexed once for all budgets.
     """
     if method not in METHODS:
         raise ValueError(f"unknown simplifier {method!r}; one of {METHODS}")
     vertices = np.asarray(vertices, dtype=np.float64)
     local, centre = _clean.centred(vertices)
     faces = np.asarray(faces, dtype=np.int64)
-    identity = Simplified(vertices, faces, np.arange(len(vertices)), 0.0, 0, 0)
-    if len(faces) < MIN_FACES or budget_m <= 0:
-        return identity
+    prev = Simplified(vertices, faces, np.arange(len(vertices)), 0.0, 0, 0)
+    if len(faces) < MIN_FACES:
+        return [prev] * len(budgets_m)
+    out = []
     if method != "meshoptimizer":
-        best = _search_count(_Judge(local, faces, samples), budget_m, iterations, method)
-        if best is None or len(best.faces) >= len(faces):
-            return identity
-        return replace(best, vertices=best.vertices + centre)
+        judge = _Judge(local, faces, samples)
+        for budget in budgets_m:
+            best = _search_count(judge, budget, iterations, method) if budget > 0 else None
+            if best is not None and len(best.faces) < len(prev.faces):
+                prev = replace(best, vertices=best.vertices + centre)
+            out.append(prev)
+        return out
 
     attrs = [] if parts is None else [(np.asarray(parts, dtype=np.float64)[:, None], 0.5)]
     rep = _clean.weld_map(local, _clean.weld_tolerance(local), attrs)
     first, welded_index = np.unique(rep, return_inverse=True)
-    welded_faces = welded_index[faces]
-    judge = _Judge(local[first], welded_faces, samples)
-    best = _search_meshopt(judge, budget_m, iterations)
-    if best is None or len(best.faces) >= len(faces):
-        return identity
-    corners = _original_corners(best.kept[best.faces], welded_index, local, normals)
-    used, new_faces = _clean.compact(corners, len(vertices))
-    return Simplified(vertices[used], new_faces, used, best.error_m, best.flipped, best.non_manifold_added)
+    judge = _Judge(local[first], welded_index[faces], samples)
+    lock = None
+    for budget in budgets_m:
+        best, lock = _search_meshopt(judge, budget, iterations, lock) if budget > 0 else (None, lock)
+        if best is not None and len(best.faces) < len(prev.faces):
+            corners = _original_corners(best.kept[best.faces], welded_index, local, normals)
+            used, new_faces = _clean.compact(corners, len(vertices))
+            prev = Simplified(vertices[used], new_faces, used, best.error_m, best.flipped, best.non_manifold_added)
+        out.append(prev)
+    return out
 
 
 def _original_corners(welded_faces: np.ndarray, welded_index: np.ndarray, vertices: np.ndarray,
@@ -467,7 +469,7 @@ class LodOptions:
 
     budgets_m: tuple[float, ...] = (0.005, 0.02, 0.08)
     method: str = "meshoptimizer"
-    iterations: int = 6
+    iterations: int = ITERATIONS
     samples: int = 20_000
 
 
@@ -550,30 +552,54 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
     scale = max(link_scale, 1e-12)
     chains = {v.name: [v.mesh] for v in group}
     errors = np.zeros(len(budgets))
-    prev = None
-    for i, b in enumerate(budgets):
-        r = simplify_checked(vertices, faces, b / scale, options.method, options.iterations, options.samples,
-                             normals=normals, parts=parts_id)
-        if prev is not None and len(prev.faces) <= len(r.faces):
-            r = prev  # the finer level's mesh is coarser and within this larger budget too
-        prev = r
+    levels = simplify_levels(vertices, faces, [b / scale for b in budgets], options.method, options.iterations,
+                             options.samples, normals=normals, parts=parts_id)
+    for i, r in enumerate(levels):
         errors[i] = r.error_m * scale
-        if r.faces is faces or len(group) == 1 and r.kept is None:
+        if r.faces is faces:
             for v in group:
-                chains[v.name].append(v.mesh if r.faces is faces else _lod_mesh(v.mesh, r))
+                chains[v.name].append(v.mesh)
             continue
-        owner = np.searchsorted(offsets, r.kept, side="right") - 1
-        face_owner = owner[r.faces[:, 0]]
-        for k, v in enumerate(group):
-            sel = r.faces[face_owner == k]
-            if len(sel) == 0:  # a part never vanishes: keep its previous level
-                chains[v.name].append(chains[v.name][-1])
-                continue
+        if len(group) == 1 and r.kept is None:
+            per_visual = {group[0].name: _lod_mesh(group[0].mesh, r)}
+        else:
+            per_visual = _split(group, offsets, r)
+        for v in group:
+            finer = chains[v.name][-1]
+            mesh = per_visual.get(v.name)
+            if mesh is None or _adds_errors(finer, mesh):
+                # a part never vanishes nor collapses flat: it keeps its finer level,
+                # whose error is within the finer (smaller) budget
+                mesh = finer
+                errors[i] = max(errors[i], errors[i - 1] if i else 0.0)
+            chains[v.name].append(mesh)
+    return chains, errors
+
+
+def _split(group: list[ir.Visual], offsets: np.ndarray, r: Simplified) -> dict[str, ir.Mesh]:
+    """The union's simplification back per visual (meshoptimizer keeps original
+    vertices, so every face has one owner); visuals left with no face are absent."""
+    owner = np.searchsorted(offsets, r.kept, side="right") - 1
+    face_owner = owner[r.faces[:, 0]]
+    out = {}
+    for k, v in enumerate(group):
+        sel = r.faces[face_owner == k]
+        if len(sel):
             used, local_faces = _clean.compact(sel, len(r.kept))
             kept = r.kept[used] - offsets[k]
-            mine = Simplified(v.mesh.vertices[kept], local_faces, kept, r.error_m, 0, 0)
-            chains[v.name].append(_lod_mesh(v.mesh, mine))
-    return chains, errors
+            out[v.name] = _lod_mesh(v.mesh, Simplified(v.mesh.vertices[kept], local_faces, kept, r.error_m, 0, 0))
+    return out
+
+
+def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh) -> bool:
+    """Would the coarser mesh give the validator an error the finer one does not
+    have? (A cap thinner than the budget collapses into a closed part of no volume.)"""
+    from ..validate.checks import mesh_findings
+
+    def codes(mesh):
+        return {f.code for f in mesh_findings(mesh, "") if f.severity == "error"}
+
+    return bool(codes(coarser) - codes(finer))
 
 
 def _check_clean(asset: ir.Asset, vis: ir.Visual) -> None:

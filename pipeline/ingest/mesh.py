@@ -99,6 +99,8 @@ def asset_from_trimesh(loaded, cfg, path: Path, up_axis: str, units: str,
         vertices = np.asarray(geom.vertices, dtype=np.float64)
         faces = np.asarray(geom.faces, dtype=np.int64)
         vis_name = _safe_name(name, "mesh")
+        if vis_name[0].isdigit():  # OpenCASCADE numbers unnamed STEP solids
+            vis_name = f"part_{vis_name}"
         while vis_name in seen:
             vis_name += "_"
         seen.add(vis_name)

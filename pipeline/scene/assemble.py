@@ -94,7 +94,8 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
                     terrain_model=tname, sun=sun)
     stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
-                    crs=site.crs, placed=placed, terrain_model=tname, sun=sun)
+                    crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
+                    articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
     scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
                      origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
 

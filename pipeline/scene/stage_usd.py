@@ -1,5 +1,6 @@
-"""The OpenUSD scene: /Site (kind assembly) with one instanceable reference per
-placement, the LOD picked by variant selection, the terrain, and a DistantLight sun.
+"""The OpenUSD scene: /Site (kind assembly) with one reference per placement
+(instanceable unless the model is articulated), the LOD picked by variant selection,
+the terrain, and a DistantLight sun.
 
 Authored with the Sdf layer API, not through a stage: nothing is composed while
 writing (hundreds of references would be opened for nothing), and references are
@@ -44,7 +45,10 @@ def sun_orientation(elevation_deg: float, azimuth_deg: float):
 
 
 def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, placed: list[Placed],
-          terrain_model: str, sun: dict) -> None:
+          terrain_model: str, sun: dict, articulated: frozenset[str] = frozenset()) -> None:
+    """`articulated`: asset ids with joints. Their placements are not instanceable:
+    physics refuses RigidBodyAPI on instance proxies, and each one's joints move on
+    their own (a switch open here, closed there)."""
     from pxr import Gf, Sdf, Vt
 
     path = Path(path)
@@ -72,7 +76,7 @@ def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, pla
         prim = Sdf.PrimSpec(scope, safe_name(p.tag), Sdf.SpecifierDef, "Xform")
         prim.referenceList.Prepend(Sdf.Reference(_reference(p.asset_id)))
         prim.variantSelections["lod"] = f"lod{pl.lod}"
-        prim.instanceable = True
+        prim.instanceable = p.asset_id not in articulated
         x, y, z = (float(v) for v in pl.pose[:3, 3])
         _attr(prim, "xformOp:translate", Sdf.ValueTypeNames.Double3, Gf.Vec3d(x, y, z))
         _attr(prim, "xformOp:rotateZ", Sdf.ValueTypeNames.Double, float(np.degrees(pl.yaw)))
