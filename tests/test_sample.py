@@ -1,15 +1,20 @@
 """The full sample substation, end to end (slow; CI runs it): build, validate with the
-formats' own validators, run the oil-leak scenario. Builds into the repository's
-build/ folder, so a later `make scene` finds the work done."""
+formats' own validators, run the oil-leak scenario, render frames and the study.
+Builds into the repository's build/ folder, so a later `make scene` finds the work
+done."""
 
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+from pipeline.runtime import render as r
 
 ROOT = Path(__file__).resolve().parent.parent
 BUILD = ROOT / "build"
@@ -58,3 +63,64 @@ def test_oil_leak_scenario_runs_on_the_sample(sample):
     lines = (run / "states.jsonl").read_text().splitlines()
     assert len(lines) >= 60
     assert (run / "states.usda").is_file()
+
+
+# --- render-in-the-loop on the built sample ---------------------------------------
+
+TINY = r.PhoneCamera(width=64, height=48, samples=4)
+
+
+def test_frames_labels_and_determinism(sample, tmp_path):
+    site = r.load_site(sample)
+    shots = dict(r.study_shots(site))
+    night, noon = shots["midnight"], shots["early_morning"]  # the white dial in direct sun
+    a = r.render_shots(site, [noon], tmp_path / "a", cam=TINY, seed=7)[0]
+    b = r.render_shots(site, [noon], tmp_path / "b", cam=TINY, seed=7)[0]
+    assert a["sha256"] == b["sha256"] and np.array_equal(a["rgb"], b["rgb"])
+    labels = json.loads((tmp_path / "a" / "frame_0000.json").read_text())
+    g = labels["gauges"]["gauge_tank"]
+    x0, y0, x1, y1 = g["box"]
+    assert g["inside_frame"] and x0 < g["centre"][0] < x1 and y0 < g["centre"][1] < y1
+    assert labels["camera"]["fx"] == pytest.approx(32.0 / math.tan(1.047 / 45 / 2))
+    # The box lands on the dial: it holds the image's brightest (white dial) pixels.
+    gray = a["rgb"].mean(axis=2)
+    ys, xs = np.nonzero(gray >= np.percentile(gray, 90))
+    inside = (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)
+    assert inside.mean() > 0.6
+    dark = r.render_shots(site, [night], tmp_path / "n", cam=TINY, seed=7)[0]
+    assert float((dark["rgb"].mean(axis=2) > 240).mean()) == 0.0
+
+
+def test_study_table(sample, tmp_path):
+    import shutil
+
+    shutil.copytree(sample / "scene", tmp_path / "scene")
+    (tmp_path / "models").symlink_to((sample / "models").resolve())
+    r.render_study(tmp_path, cam=TINY)
+    report = json.loads((tmp_path / "reports" / "study.json").read_text())
+    names = [c["condition"] for c in report["conditions"]]
+    # A day's order from the first light in which the pointer is visible (H_ref).
+    assert names == ["early_morning", "solar_noon", "late_afternoon", "early_night", "midnight", "late_night"]
+    assert report["target"] == "RE-B3"
+    for c in report["conditions"]:
+        assert 0.0 <= c["S"] <= 1.0 and c["C"] >= 0.0
+        assert (tmp_path / "reports" / c["image"]).is_file()
+    by = {c["condition"]: c for c in report["conditions"]}
+    assert by["early_morning"]["H"] == 1.0 and by["early_morning"]["H_true"] == 1.0
+    assert by["midnight"]["S"] == 0.0 and by["late_night"]["S"] == 0.0
+    assert by["late_afternoon"]["veil"] > 0.0 and by["late_afternoon"]["S"] > 0.5  # glare
+    assert by["solar_noon"]["S"] < 0.2
+    assert "late_afternoon" in (tmp_path / "reports" / "study.html").read_text()
+
+
+def test_study_viewpoint_faces_the_late_sun_with_a_clear_view(sample):
+    """Bank B's gauges face ENE: the study camera looks WSW, the late sun within ~25 deg
+    of its axis and not hidden by a built model."""
+    site = r.load_site(sample)
+    shots = dict(r.study_shots(site))
+    late = shots["late_afternoon"]
+    axis = -late.cam_pose[:3, 2]
+    assert math.degrees(math.acos(float(axis @ late.sun_dir))) < 25.0
+    assert not r._blocked(site, late.cam_pose[:3, 3], late.sun_dir, 300.0)
+    centre, normal = r.dial_world(site.pose(site.placement(r.STUDY_TARGET)))
+    assert float(-axis @ normal) > math.cos(r.STUDY_MAX_OBLIQUITY) - 1e-9
