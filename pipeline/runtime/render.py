@@ -32,6 +32,7 @@ import datetime as dt
 import hashlib
 import json
 import math
+import re
 import shutil
 import statistics
 import tempfile
@@ -488,6 +489,12 @@ class _Blender:
         before = set(bpy.data.objects)
         bpy.ops.import_scene.gltf(filepath=str(glb))
         new = [o for o in bpy.data.objects if o not in before]
+        # Blender imports MSFT_lod's out-of-scene nodes as extra roots at the origin:
+        # close-ups draw LOD 0, so the lower levels go
+        lower = [o for o in new if LOD_NODE.search(_base_name(o.name))]
+        new = [o for o in new if o not in lower]
+        for o in lower:
+            bpy.data.objects.remove(o, do_unlink=True)
         glass = {m.name for m in {sl.material for o in new for sl in o.material_slots if sl.material is not None}
                  if _tune_material(m)}
         for o in new:
@@ -619,6 +626,7 @@ class _Blender:
         return px.reshape(h, w, 4)[::-1, :, :3].copy()
 
 
+LOD_NODE = re.compile(r"__lod[1-9][0-9]*$")  # export/gltf.py names lower LODs so
 GLASS_ALPHA_MAX = 0.5  # glTF alpha at or below which a material is a window, not a tint
 
 
