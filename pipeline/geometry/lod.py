@@ -319,15 +319,22 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
     rounds that would find them again."""
     n = len(judge.faces)
     lock = np.zeros(len(judge.vertices), dtype=bool) if lock is None else lock.copy()
-    best, s = None, budget
+    best, best_lock, s = None, lock.copy(), budget
+    widespread = np.zeros((0, 3))  # misses left unlocked while a lower target was tried
     for round_ in range(iterations):
         v, f = _meshopt(judge.vertices, judge.faces, 0, s, lock)
         if len(f) >= NO_GAIN * n:
-            break  # the mesh is as simple as this error allows: nothing to gain
+            if len(widespread) == 0:
+                break  # the mesh is as simple as this error allows: nothing to gain
+            # a lower target gained nothing either (a wire mesh in one plane: its
+            # quadrics see no error, so it goes all or nothing): lock the misses instead
+            lock[judge.near_vertices(widespread, 4)] = True
+            widespread, s = np.zeros((0, 3)), budget
+            continue
         r, where = judge.measure(v, f, np.arange(len(v)), budget, threshold=LOCK_SHARE * budget)
         if r.valid and r.error_m <= budget:
             if best is None or len(r.faces) < len(best.faces):
-                best = r
+                best, best_lock = r, lock.copy()
             if len(where) == 0:
                 break
         if not np.isfinite(r.error_m):  # everything collapsed away
@@ -337,6 +344,7 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
             # misses everywhere (a smooth surface): the target itself is too coarse;
             # lock only around what went badly wrong (a small part collapsed away)
             s /= 2.0
+            widespread = where
             where = where[judge.how_far > 2.0 * budget]
             if len(where) == 0:
                 continue
@@ -344,7 +352,9 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
         if len(new) == 0 or lock[new].all():
             break
         lock[new] = True
-    return best, lock
+    # the next level starts from the lock that gave this one's result, not from the
+    # locks added by later rounds that found nothing better
+    return best, best_lock
 
 
 def _search_count(judge: _Judge, budget: float, iterations: int, method: str) -> Simplified | None:
