@@ -562,6 +562,7 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
     scale = max(link_scale, 1e-12)
     chains = {v.name: [v.mesh] for v in group}
     errors = np.zeros(len(budgets))
+    known: dict = {}  # id(mesh) -> (mesh, its validator error codes)
     levels = simplify_levels(vertices, faces, [b / scale for b in budgets], options.method, options.iterations,
                              options.samples, normals=normals, parts=parts_id)
     for i, r in enumerate(levels):
@@ -577,7 +578,7 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
         for v in group:
             finer = chains[v.name][-1]
             mesh = per_visual.get(v.name)
-            if mesh is None or _adds_errors(finer, mesh):
+            if mesh is None or _adds_errors(finer, mesh, known):
                 # a part never vanishes nor collapses flat: it keeps its finer level,
                 # whose error is within the finer (smaller) budget
                 mesh = finer
@@ -601,13 +602,16 @@ def _split(group: list[ir.Visual], offsets: np.ndarray, r: Simplified) -> dict[s
     return out
 
 
-def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh) -> bool:
+def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh, known: dict) -> bool:
     """Would the coarser mesh give the validator an error the finer one does not
-    have? (A cap thinner than the budget collapses into a closed part of no volume.)"""
+    have? (A cap thinner than the budget collapses into a closed part of no volume.)
+    `known` caches each mesh's codes by id, holding the mesh so the id stays its own."""
     from ..validate.checks import mesh_findings
 
     def codes(mesh):
-        return {f.code for f in mesh_findings(mesh, "") if f.severity == "error"}
+        if id(mesh) not in known:
+            known[id(mesh)] = (mesh, {f.code for f in mesh_findings(mesh, "") if f.severity == "error"})
+        return known[id(mesh)][1]
 
     return bool(codes(coarser) - codes(finer))
 
