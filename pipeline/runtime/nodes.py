@@ -51,13 +51,15 @@ def node_rng(seed: int, node_id: str) -> np.random.Generator:
 def seeded_uniform(seed: int, stream: str, t: float, low: float, high: float) -> float:
     """A uniform draw in [low, high) that is a pure function of (seed, stream, t).
 
-    Counter-based (Philox keyed by seed and stream, counter = t in whole milliseconds),
-    so any node can evaluate the same noise at any time, e.g. a signal delayed by 1.2 s
-    reproduces its source's noise exactly. Times closer than 1 ms share a draw.
+    Counter-based (BLAKE2b of seed, stream and t in whole milliseconds; 53 bits make
+    the double), so any node can evaluate the same noise at any time, e.g. a signal
+    delayed by 1.2 s reproduces its source's noise exactly. Times closer than 1 ms
+    share a draw. A hash, not a generator object per draw: this runs in every step.
     """
-    key = (int(seed) << 64) | stable_hash(stream)
-    counter = int(round(float(t) * 1000.0)) % (1 << 256)
-    return float(np.random.Generator(np.random.Philox(key=key, counter=counter)).uniform(low, high))
+    counter = int(round(float(t) * 1000.0))
+    digest = hashlib.blake2b(f"{int(seed)}|{stream}|{counter}".encode("utf-8"), digest_size=8).digest()
+    u = (int.from_bytes(digest, "little") >> 11) * 2.0**-53
+    return low + (high - low) * u
 
 
 class Node:
@@ -373,6 +375,18 @@ def state_binding(record: dict):
         materials=tuple(record.get("materials") or ()), thresholds=tuple(record.get("thresholds") or ()))
 
 
+_BINDINGS: dict[int, tuple[dict, object]] = {}  # id(record) -> (record, its StateBinding)
+
+
+def _binding(record: dict):
+    """state_binding, built once per manifest record (the record is held, so its id
+    stays its own): visual_states runs in every step."""
+    hit = _BINDINGS.get(id(record))
+    if hit is None or hit[0] is not record:
+        hit = _BINDINGS[id(record)] = (record, state_binding(record))
+    return hit[1]
+
+
 def delta_matrix(effect: str, axis, output: float) -> np.ndarray:
     """(4, 4) float64 change of a visual's pose for a rotate/translate/scale output."""
     a = np.asarray(axis, dtype=np.float64)
@@ -408,7 +422,7 @@ def visual_states(values: dict[str, dict[str, float]], observed: list[Observed])
             rest = np.array(recs[0].get("rest_pose") or np.eye(4).reshape(16), dtype=np.float64).reshape(4, 4)
             m, material, weights, outs = rest.copy(), None, {}, []
             for rec in recs:
-                b = state_binding(rec)
+                b = _binding(rec)
                 value = fed[b.variable]
                 y = b.output(value)
                 outs.append(BindingOutput(rec, value, y))
