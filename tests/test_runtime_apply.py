@@ -26,6 +26,9 @@ def box(size=0.1, z=0.0):
     return v, f
 
 
+LAMP_ON_BELOW = 90.0  # % tank level; the 20 s run goes 101 -> 81.8, so the lamp switches once
+
+
 def tiny_asset() -> ir.Asset:
     v, f = box()
     column = ir.Mesh(v, f, shape_keys=(ir.ShapeKey("full", v * [1, 1, 5]),))
@@ -42,7 +45,7 @@ def tiny_asset() -> ir.Asset:
     bindings = (
         ir.StateBinding("oil_level_tank", "rotate", "pointer", (0.0, 100.0), (-2.0, 2.0), axis=(0.0, -1.0, 0.0)),
         ir.StateBinding("oil_level_tank", "material", "lamp", (0.0, 100.0), materials=("lamp_red", "lamp_off"),
-                        thresholds=(50.0,)),
+                        thresholds=(LAMP_ON_BELOW,)),
         ir.StateBinding("oil_level_b1", "shape", "column", (0.0, 100.0), (0.0, 1.0), shape_key="full"),
     )
     return ir.Asset(ASSET, "reactor", (ir.Link("body", visuals=visuals),), materials=mats, bindings=bindings)
@@ -113,7 +116,7 @@ def test_states_jsonl_has_every_output_per_step(result):
 
 
 def test_usd_layer_samples_equal_the_binding_mapping(result):
-    from pxr import Usd, UsdGeom, UsdLux, UsdSkel
+    from pxr import Usd, UsdGeom, UsdLux, UsdShade, UsdSkel
 
     _, out, summary = result
     rows = trace(out)
@@ -127,6 +130,12 @@ def test_usd_layer_samples_equal_the_binding_mapping(result):
     shape = ir.StateBinding("oil_level_b1", "shape", "column", (0.0, 100.0), (0.0, 1.0))
     anim = UsdSkel.Animation(stage.GetPrimAtPath(f"{placement}/body/column/skel/anim"))
     lamp_state = stage.GetPrimAtPath(placement).GetAttribute("twin:state_oil_level_tank")
+    # The lamp's mesh shows its state look, whose inputs follow the selected material.
+    lamp_mesh = next(c for c in stage.GetPrimAtPath(f"{placement}/body/lamp").GetChildren() if c.GetTypeName() == "Mesh")
+    bound, _ = UsdShade.MaterialBindingAPI(lamp_mesh).ComputeBoundMaterial()
+    assert bound.GetPath() == f"{placement}/TwinLooks/lamp"
+    look = UsdShade.Shader(stage.GetPrimAtPath(f"{placement}/TwinLooks/lamp/PreviewSurface"))
+    assert {bool(row["outputs"]["tank.level"] < LAMP_ON_BELOW) for row in rows} == {True, False}  # both seen
     for k, row in enumerate(rows):
         q = op.Get(k)
         angle = 2 * math.atan2(q.GetImaginary().GetLength(), q.GetReal())
@@ -135,7 +144,10 @@ def test_usd_layer_samples_equal_the_binding_mapping(result):
         signed = angle if axis is None or axis[1] < 0 else -angle  # binding axis is -Y
         assert signed == pytest.approx(expected, abs=1e-6)
         assert anim.GetBlendShapeWeightsAttr().Get(k)[0] == pytest.approx(shape.output(row["outputs"]["bushing_1.level"]), abs=1e-6)
-        assert lamp_state.Get(k) == ("s1" if row["outputs"]["tank.level"] >= 50 else "s0")
+        red = row["outputs"]["tank.level"] < LAMP_ON_BELOW
+        assert lamp_state.Get(k) == ("s0" if red else "s1")
+        assert tuple(look.GetInput("diffuseColor").Get(k)) == pytest.approx((1, 0, 0) if red else (0.3, 0.3, 0.3))
+        assert tuple(look.GetInput("emissiveColor").Get(k)) == pytest.approx((5, 0, 0) if red else (0, 0, 0))
     # The composed pointer = rest pose then the rotation about its own axis.
     m = np.array(UsdGeom.Xformable(pointer).GetLocalTransformation(5)).T
     rest = np.eye(4)
@@ -170,7 +182,7 @@ def test_animated_glb_passes_the_gltf_validator(result):
     (anim,) = doc["animations"]
     assert sorted(c["target"]["path"] for c in anim["channels"]) == ["rotation", "weights"]
     sel = anim["extras"]["KHR_materials_variants_selection"]
-    assert len(sel) == 21 and {x["variant"] for x in sel} == {"oil_level_tank:lamp_off"}  # level stays >= 50
+    assert len(sel) == 21 and {x["variant"] for x in sel} == {"oil_level_tank:lamp_off", "oil_level_tank:lamp_red"}
     declared = {v["name"] for v in doc["extensions"]["KHR_materials_variants"]["variants"]}
     assert "oil_level_tank:lamp_off" in declared and "oil_level_tank:lamp_red" in declared
     try:
@@ -196,7 +208,11 @@ def test_sdf_variants_and_sun_fragments(result):
     root = etree.parse(str(out / "sdf" / "models" / first / "model.sdf"))
     assert root.find("model").get("name") == first
     lamp = root.find("model/link/visual[@name='lamp']/material/emissive").text
-    assert lamp.split()[:3] == ["0.3", "0.3", "0.3"] or lamp.split()[0] != "1"  # level >= 50: lamp off
+    assert float(lamp.split()[0]) == 0.0  # the level starts above LAMP_ON_BELOW: lamp off
+    last = table[-1]["placements"][TAG].removeprefix("model://")
+    root = etree.parse(str(out / "sdf" / "models" / last / "model.sdf"))
+    lamp = root.find("model/link/visual[@name='lamp']/material/emissive").text
+    assert float(lamp.split()[0]) > 0.0  # and ends below it: lamp red, glowing
     sun = [json.loads(x) for x in (out / "sdf" / "sun.jsonl").read_text().splitlines()]
     assert len(sun) == 21 and sun[0]["direction"][2] < 0
     assert any("shape" in n for n in s["not_applied"])

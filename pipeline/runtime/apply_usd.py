@@ -11,9 +11,12 @@ timeCodesPerSecond = 1 / step_s):
 - shape bindings: `blendShapeWeights` of the visual's SkelAnimation (<visual>/skel/anim,
   the USD writer's layout), in the animation's blendShapes order;
 - material bindings: USD cannot time-sample a relationship or a variant selection, so
-  the layer selects the model's variant `state_<variable>` = s<i> for the first step and
-  time-samples the selection as the token attribute `twin:state_<variable>` on the
-  placement prim (a player switches the variant from it; held interpolation);
+  the visual is bound to its own state look, `<placement>/TwinLooks/<visual>` (a
+  UsdPreviewSurface whose diffuse, emissive, metallic, roughness and opacity are
+  time-sampled from the manifest's PBR values of the material each step selects), which
+  any USD player shows as it plays. The model's variant `state_<variable>` is selected
+  for the first step, and the selection is time-sampled as the token attribute
+  `twin:state_<variable>` on the placement prim (for a player that swaps variants);
 - the sun DistantLight /Site/Sun: `xformOp:orient` (+Z towards the sun, as the scene
   writer aims it) and `inputs:intensity` = irradiance (W/m2) x sun_intensity_scale.
 
@@ -42,6 +45,46 @@ def _quat(Gf, axis, angle: float):
     return Gf.Quatd(math.cos(angle / 2.0), Gf.Vec3d(*(a * s)))
 
 
+LOOK_INPUTS = (("diffuseColor", "Color3f"), ("emissiveColor", "Color3f"), ("metallic", "Float"),
+               ("roughness", "Float"), ("opacity", "Float"))
+
+
+def state_materials(frame, stage, materials: dict, looks: dict):
+    """(visual prim path, manifest material record) of every visual whose material a
+    state selects in this frame; binds a new state look to a visual seen first."""
+    from pxr import UsdShade
+
+    for vs in frame:
+        record = materials.get(vs.tag, {}).get(vs.material) if vs.material else None
+        if record is None:
+            continue
+        placement = names.scene_placement_path(vs.tag)
+        path = f"{placement}/{names.safe_name(vs.link)}/{names.safe_name(vs.visual)}"
+        if path not in looks:
+            visual = stage.GetPrimAtPath(path)
+            if not visual:
+                continue
+            look = UsdShade.Material.Define(stage, f"{placement}/TwinLooks/{names.safe_name(vs.visual)}")
+            shader = UsdShade.Shader.Define(stage, look.GetPath().AppendChild("PreviewSurface"))
+            shader.CreateIdAttr("UsdPreviewSurface")
+            look.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+            meshes = [c for c in visual.GetChildren() if c.GetTypeName() == "Mesh"] or [visual]
+            for mesh in meshes:  # a binding on the mesh itself: stronger than the model's
+                UsdShade.MaterialBindingAPI.Apply(mesh).Bind(look)
+            looks[path] = shader
+        yield path, record
+
+
+def _set_look(shader, record: dict, k: int) -> None:
+    from pxr import Gf, Sdf
+
+    r, g, b, a = (float(c) for c in record["base_color"])
+    values = {"diffuseColor": Gf.Vec3f(r, g, b), "emissiveColor": Gf.Vec3f(*(float(c) for c in record["emission"])),
+              "metallic": float(record["metallic"]), "roughness": float(record["roughness"]), "opacity": a}
+    for name, type_name in LOOK_INPUTS:
+        shader.CreateInput(name, getattr(Sdf.ValueTypeNames, type_name)).Set(values[name], k)
+
+
 def write(run, scene_usda: Path, out_path: Path) -> dict:
     """Author the layer; returns a summary (samples written, things not applied)."""
     from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdSkel, Vt
@@ -67,6 +110,8 @@ def write(run, scene_usda: Path, out_path: Path) -> dict:
     skipped: list[str] = []
     samples = 0
     ops: dict[tuple, object] = {}
+    materials = {o.tag: {m["name"]: m for m in o.manifest.get("materials", [])} for o in run.observed}
+    looks: dict[str, object] = {}  # visual prim path -> the PreviewSurface of its state look
     for tag in sorted({o.tag for o in run.observed}):
         prim = stage.GetPrimAtPath(names.scene_placement_path(tag))
         if prim:
@@ -129,6 +174,9 @@ def write(run, scene_usda: Path, out_path: Path) -> dict:
                             skipped.append(f"{placement}: no variant set {vset_name} (material binding not selectable)")
                     ops[key].Set(f"s{int(bo.output)}", k)
                     samples += 1
+        for path, material in state_materials(frame, stage, materials, looks):
+            _set_look(looks[path], material, k)
+            samples += 1
     sun_samples = 0
     if run.sun is not None:
         light = UsdLux.DistantLight(stage.GetPrimAtPath(SUN_PATH))
