@@ -17,21 +17,27 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
-# External validators (ign sdf, Khronos glTF validator); skipped with a note if absent.
-tools:
-	@bash .ci/install-tools
+# External validators (ign sdf, Khronos glTF validator, Chromium for the report test):
+# installed on first use by `make scene` and `make test` (apt needs root or sudo).
+TOOLS  := tools/node_modules/.installed
 
-scene: $(STAMP)
+$(TOOLS): tools/package-lock.json .ci/install-tools
+	bash .ci/install-tools
+	touch $(TOOLS)
+
+tools: $(TOOLS)
+
+scene: $(STAMP) $(TOOLS)
 	$(BIN)/twin build --sources $(SOURCES) --out $(OUT) $(if $(JOBS),--jobs $(JOBS))
 	$(BIN)/twin validate --sources $(SOURCES) --out $(OUT)
 
 validate: $(STAMP)
 	$(BIN)/twin validate --sources $(SOURCES) --out $(OUT)
 
-test: $(STAMP)
+test: $(STAMP) $(TOOLS)
 	$(BIN)/python -m pytest -q
 
-bench: $(STAMP)
+bench: $(STAMP) $(TOOLS)
 	$(BIN)/twin bench --sources $(SOURCES) --out $(OUT)
 
 clean:
