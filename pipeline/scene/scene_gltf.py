@@ -1,6 +1,7 @@
 """The glTF scene: one .glb that reuses each model's meshes through
-EXT_mesh_gpu_instancing (a mesh is stored once however often it is placed), MSFT_lod
-for the coarser levels, a KHR_lights_punctual sun, Y up, the geodetic origin in extras.
+EXT_mesh_gpu_instancing (a mesh is stored once however often it is placed; meshes with
+morph targets get a node per placement instead), MSFT_lod for the coarser levels, a
+KHR_lights_punctual sun, Y up, the geodetic origin in extras.
 
 It reads the built model .glb files (the packages are its input, not the IR).
 """
@@ -218,6 +219,26 @@ def lod_meshes(doc: dict, node_index: int) -> list[int]:
     return chain
 
 
+def _per_placement(sb: SceneBuilder, asset_id: str, lod: int, doc: dict, binary: bytes, node_index: int,
+                   chain: list[int], members: list[Placed], matrices: list[np.ndarray]) -> None:
+    """A visual with morph targets gets one node per placement (its meshes shared): each
+    placement's shape-key weights are its own state (an oil column's level), and
+    Blender's glTF importer fails on instanced meshes with morph targets."""
+    meshes = [sb.copy_mesh(asset_id, doc, binary, mesh_index) for mesh_index in chain]
+    base = f"{asset_id}/lod{lod}/{doc['nodes'][node_index].get('name', node_index)}"
+    for pl, m in zip(members, matrices):
+        name = f"{base}/{pl.placement.tag}"
+        matrix = [float(v) for v in m.T.reshape(16)]
+        coarser = [sb.add_node({"name": f"{name}/lod+{k}", "mesh": mesh, "matrix": matrix}, root=False)
+                   for k, mesh in enumerate(meshes[1:], start=1)]
+        node = {"name": name, "mesh": meshes[0], "matrix": matrix, "extras": {"tags": [pl.placement.tag]}}
+        if coarser:
+            node["extensions"] = {"MSFT_lod": {"ids": coarser}}
+            node["extras"]["MSFT_screencoverage"] = [0.2 / 4**k for k in range(len(coarser) + 1)]
+            sb.used_ext.add("MSFT_lod")
+        sb.add_node(node)
+
+
 def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str, origin_llh,
           crs: str, site_name: str, sun: dict) -> None:
     sb = SceneBuilder()
@@ -240,6 +261,9 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
         poses = [Z_TO_Y @ pl.pose @ Z_TO_Y.T for pl in members]
         for ni, local in visual_nodes(doc):
             chain = lod_meshes(doc, ni)[lod:] or lod_meshes(doc, ni)[-1:]
+            if any("targets" in p for p in doc["meshes"][chain[0]]["primitives"]):
+                _per_placement(sb, asset_id, lod, doc, binary, ni, chain, members, [p @ local for p in poses])
+                continue
             inst = sb.instance_accessors([p @ local for p in poses])
             ext = {"EXT_mesh_gpu_instancing": {"attributes": inst}}
             name = f"{asset_id}/lod{lod}/{doc['nodes'][ni].get('name', ni)}"
