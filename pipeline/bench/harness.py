@@ -31,6 +31,7 @@ def _sections(results: dict):
         ("georef", sections.georef_section),
         ("runtime", sections.runtime_section),
         ("sun", lambda ctx: sections.sun_section(ctx, results.get("runtime", {}).get("data"))),
+        ("render", sections.render_section),
         ("blender", blender_peer.blender_section),
         ("blender_reexport", blender_peer.reexport_section),
         ("gltf_transform", gltf_transform.gltf_transform_section),

@@ -32,6 +32,7 @@ def rows(sections: dict) -> list[dict]:
     out += _runtime_rows(data.get("runtime"), data.get("blender_reexport"))
     out += _blender_rows(data.get("blender"))
     out += _gltf_transform_rows(data.get("gltf_transform"))
+    out += _render_rows(data.get("render"))
     return [r for r in out if r is not None]
 
 
@@ -144,3 +145,12 @@ def _gltf_transform_rows(d):
                             r["bytes_in"], r["bytes_out"], "bytes", f"gltf-transform {r['op']}",
                             "ratio near 1: nothing left to deduplicate or instance"))
     return out
+
+
+def _render_rows(d):
+    if not d or "ours" not in d:
+        return []
+    ours, peer = d["ours"], d["blender_defaults"]
+    return [_row("render", "gauge close-up frame, Cycles CPU", ours["median_s"], peer["median_s"], "s",
+                 "Cycles at Blender's factory light paths", f"{ours['frame']}; target under 2 s")]
+

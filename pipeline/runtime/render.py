@@ -1140,16 +1140,27 @@ def _study_html(report: dict) -> str:
 # --- benchmark -----------------------------------------------------------------------------------
 
 
-def bench_render(out="build", repeats: int = 5, threads: int | None = None) -> dict:
+# Blender's factory light-path settings, for the bench's side-by-side peer.
+CYCLES_DEFAULTS = {"max_bounces": 12, "diffuse_bounces": 4, "glossy_bounces": 4, "transmission_bounces": 12,
+                   "volume_bounces": 0, "transparent_max_bounces": 8, "caustics_reflective": True,
+                   "caustics_refractive": True, "use_light_tree": True, "tile_size": 2048}
+
+
+def bench_render(out="build", repeats: int = 5, threads: int | None = None, sources: Path | None = None,
+                 cycles_defaults: bool = False) -> dict:
     """Seconds per 320x240 frame (16 samples) of the study's gauge close-up at solar noon:
     the scene is loaded once (load_s), then `repeats` frames re-render it with the
-    persistent data kept (render_s: Cycles alone; frame_s: with the phone's develop)."""
-    site = load_site(Path(out))
+    persistent data kept (render_s: Cycles alone; frame_s: with the phone's develop).
+    `cycles_defaults`: the same frame with Blender's factory light paths (the peer)."""
+    site = load_site(Path(out), sources)
     cam = PhoneCamera()
     shot = dict(study_shots(site))["solar_noon"]
     bl = _Blender(site, cam, 1)
     if threads:
         bl.scene.render.threads = threads
+    if cycles_defaults:
+        for key, value in CYCLES_DEFAULTS.items():
+            setattr(bl.scene.cycles, key, value)
     try:
         t0 = time.perf_counter()
         _populate(bl, site, [shot])
@@ -1170,6 +1181,6 @@ def bench_render(out="build", repeats: int = 5, threads: int | None = None) -> d
         bl.close()
     return {"frame": f"{cam.width}x{cam.height} {cam.samples} spp, solar_noon, {STUDY_TARGET}", "load_s": load_s,
             "loaded": sorted(t for t in bl.roots), "mesh_objects": objects, "lights": lights,
-            "threads": threads or _Blender.THREADS,
+            "threads": threads or _Blender.THREADS, "cycles_defaults": cycles_defaults,
             "median_s": statistics.median(times), "min_s": min(times), "max_s": max(times),
             "frame_median_s": statistics.median(frames), "repeats": repeats}
