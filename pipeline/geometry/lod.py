@@ -306,7 +306,7 @@ class _Judge:
 def _search_meshopt(judge: _Judge, budget: float, iterations: int,
                     lock: np.ndarray | None = None) -> tuple[Simplified | None, np.ndarray]:
     """Coarsest meshoptimizer result whose measurement is within budget, and the
-    vertex lock it ended with (`lock`: a finer level's, to start from).
+    vertex lock that produced it (`lock`: a finer level's, to start from).
 
     meshoptimizer's error is an area-weighted MEAN of squared distances to the planes
     around a vertex, so a vertex may slide off a narrow face (a bevel, a fin's rim, a
