@@ -201,8 +201,8 @@ def render_section(ctx: Context) -> dict:
     import subprocess
     import sys
 
-    built = ctx.built
-    if built is None or not (built / "models" / "shunt_reactor").is_dir():
+    built = ctx.built or ctx.out  # the build section's sample, else the user's build
+    if not (built / "scene" / "placements.json").is_file() or not (built / "models" / "shunt_reactor").is_dir():
         return {"skipped": "no built shunt reactor (the study's target) in these sources"}
     out = {}
     for label, defaults in (("ours", "0"), ("blender_defaults", "1")):
