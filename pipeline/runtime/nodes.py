@@ -375,16 +375,37 @@ def state_binding(record: dict):
         materials=tuple(record.get("materials") or ()), thresholds=tuple(record.get("thresholds") or ()))
 
 
-_BINDINGS: dict[int, tuple[dict, object]] = {}  # id(record) -> (record, its StateBinding)
+@dataclass(frozen=True)
+class _Compiled:
+    """A manifest binding record, parsed once: the StateBinding, the visual's rest pose
+    (4, 4), and for a rotation the cross-product matrix K of the unit axis and K @ K."""
+
+    record: dict
+    binding: object
+    rest: np.ndarray
+    k: np.ndarray
+    k2: np.ndarray
 
 
-def _binding(record: dict):
-    """state_binding, built once per manifest record (the record is held, so its id
-    stays its own): visual_states runs in every step."""
-    hit = _BINDINGS.get(id(record))
-    if hit is None or hit[0] is not record:
-        hit = _BINDINGS[id(record)] = (record, state_binding(record))
-    return hit[1]
+_COMPILED: dict[int, _Compiled] = {}  # id(record) -> its parse (holding the record, so the id stays its own)
+
+
+def _compiled(record: dict) -> _Compiled:
+    """state_binding and friends, built once per manifest record: visual_states runs in
+    every step."""
+    hit = _COMPILED.get(id(record))
+    if hit is None or hit.record is not record:
+        b = state_binding(record)
+        a = np.asarray(b.axis, dtype=np.float64)
+        n = np.linalg.norm(a)
+        a = a / n if n > 0 else np.array([0.0, 0.0, 1.0])
+        k = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+        rest = np.array(record.get("rest_pose") or np.eye(4).reshape(16), dtype=np.float64).reshape(4, 4)
+        hit = _COMPILED[id(record)] = _Compiled(record, b, rest, k, k @ k)
+    return hit
+
+
+_I3 = np.eye(3)
 
 
 def delta_matrix(effect: str, axis, output: float) -> np.ndarray:
@@ -419,10 +440,11 @@ def visual_states(values: dict[str, dict[str, float]], observed: list[Observed])
             if rec["variable"] in fed and rec.get("link"):
                 by_visual.setdefault((rec["link"], rec["target"]), []).append(rec)
         for (link, visual), recs in sorted(by_visual.items()):
-            rest = np.array(recs[0].get("rest_pose") or np.eye(4).reshape(16), dtype=np.float64).reshape(4, 4)
+            rest = _compiled(recs[0]).rest
             m, material, weights, outs = rest.copy(), None, {}, []
             for rec in recs:
-                b = _binding(rec)
+                c = _compiled(rec)
+                b = c.binding
                 value = fed[b.variable]
                 y = b.output(value)
                 outs.append(BindingOutput(rec, value, y))
@@ -430,6 +452,8 @@ def visual_states(values: dict[str, dict[str, float]], observed: list[Observed])
                     material = b.materials[y] if b.materials else None
                 elif b.effect == "shape":
                     weights[b.shape_key or ""] = float(y)
+                elif b.effect == "rotate":  # delta_matrix's Rodrigues, with K precomputed
+                    m[:3, :3] = m[:3, :3] @ (_I3 + math.sin(y) * c.k + (1.0 - math.cos(y)) * c.k2)
                 else:
                     m = m @ delta_matrix(b.effect, b.axis, float(y))
             out.append(VisualState(ob.tag, link, visual, rest, m, material, weights, tuple(outs)))
