@@ -98,7 +98,7 @@ def test_quick_bench_on_mini_sources(tmp_path):
     assert not errors, [f"{list(e.path)}: {e.message}" for e in errors[:5]]
     failed = {k: v["error"] for k, v in doc["sections"].items() if not v["ok"]}
     assert not failed, failed
-    assert {"build", "lod", "georef", "runtime", "sun", "blender", "gltf_transform"} <= set(doc["sections"])
+    assert {"build", "lod", "georef", "runtime", "sun", "render", "blender", "gltf_transform"} <= set(doc["sections"])
     assert doc["summary"] and doc["targets"]
     html = page.read_text()
     assert html.count("data:image/png;base64,") >= 6 and "Summary" in html
