@@ -604,16 +604,20 @@ def _split(group: list[ir.Visual], offsets: np.ndarray, r: Simplified) -> dict[s
 
 def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh, known: dict) -> bool:
     """Would the coarser mesh give the validator an error the finer one does not
-    have? (A cap thinner than the budget collapses into a closed part of no volume.)
-    `known` caches each mesh's codes by id, holding the mesh so the id stays its own."""
-    from ..validate.checks import mesh_findings
+    have (a cap thinner than the budget collapses into a closed part of no volume), or
+    more non-manifold or inconsistently wound edges? The union of a link's visuals is
+    judged as a whole while simplifying; this judges each visual on its own.
+    `known` caches each mesh's verdict by id, holding the mesh so the id stays its own."""
+    from ..validate.checks import edge_defect_counts, mesh_findings
 
-    def codes(mesh):
+    def verdict(mesh):
         if id(mesh) not in known:
-            known[id(mesh)] = (mesh, {f.code for f in mesh_findings(mesh, "") if f.severity == "error"})
-        return known[id(mesh)][1]
+            errors = {f.code for f in mesh_findings(mesh, "") if f.severity == "error"}
+            known[id(mesh)] = (mesh, errors, edge_defect_counts(mesh))
+        return known[id(mesh)][1:]
 
-    return bool(codes(coarser) - codes(finer))
+    (coarse_errors, coarse_edges), (fine_errors, fine_edges) = verdict(coarser), verdict(finer)
+    return bool(coarse_errors - fine_errors) or any(c > f for c, f in zip(coarse_edges, fine_edges))
 
 
 def _check_clean(asset: ir.Asset, vis: ir.Visual) -> None:

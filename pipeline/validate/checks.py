@@ -126,6 +126,38 @@ def _components(n_vertices: int, faces: np.ndarray) -> np.ndarray:
     return labels[faces[:, 0]]
 
 
+def _edge_uses(f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For faces `f: (m, 3)` on welded vertices with no repeated corner: each directed
+    edge's undirected edge id (3m,), and per undirected edge the faces using it and
+    how many of them run it from its lower to its higher vertex."""
+    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    undirected = np.sort(directed, axis=1)
+    edge_keys, edge_id, uses = np.unique(undirected, axis=0, return_inverse=True, return_counts=True)
+    edge_id = edge_id.reshape(-1)
+    forward = np.bincount(edge_id, weights=(directed[:, 0] < directed[:, 1]).astype(float), minlength=len(edge_keys))
+    return edge_id, uses, forward
+
+
+def _edge_defects(uses: np.ndarray, forward: np.ndarray) -> tuple[int, int]:
+    """(non-manifold edges, edges run twice the same way): GEOM003 and GEOM004 counts.
+    A manifold edge of a consistently wound surface is used once in each direction."""
+    return int((uses > 2).sum()), int(((uses == 2) & (forward != 1)).sum())
+
+
+def edge_defect_counts(mesh: ir.Mesh) -> tuple[int, int]:
+    """(non-manifold edges, inconsistently wound edges) of a finite mesh, judged on
+    positions welded exactly as `mesh_findings` judges them."""
+    if len(mesh.faces) == 0:
+        return 0, 0
+    _, weld = np.unique(mesh.vertices, axis=0, return_inverse=True)
+    f = weld.reshape(-1)[mesh.faces]
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]
+    if len(f) == 0:
+        return 0, 0
+    _, uses, forward = _edge_uses(f)
+    return _edge_defects(uses, forward)
+
+
 def mesh_findings(mesh: ir.Mesh, site: str, *, collision: bool = False) -> list[Finding]:
     """Geometry checks of one mesh. Topology is judged on positions welded exactly, as
     an STL's triangle soup means it (unwelded facets are not holes)."""
@@ -154,18 +186,12 @@ def mesh_findings(mesh: ir.Mesh, site: str, *, collision: bool = False) -> list[
     f = f[~repeated]  # a face with a repeated vertex has no edges to speak of
     if len(f) == 0:
         return out
-    directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    undirected = np.sort(directed, axis=1)
-    edge_keys, edge_id, uses = np.unique(undirected, axis=0, return_inverse=True, return_counts=True)
-    edge_id = edge_id.reshape(-1)
-    forward = np.bincount(edge_id, weights=(directed[:, 0] < directed[:, 1]).astype(float), minlength=len(edge_keys))
-    nonmanifold = uses > 2
-    if nonmanifold.any():
-        out.append(finding("GEOM003", site, f"{int(nonmanifold.sum())} edges are shared by more than two faces"))
-    # A manifold edge of a consistently wound surface is used once in each direction.
-    flipped = (uses == 2) & (forward != 1)
-    if flipped.any():
-        out.append(finding("GEOM004", site, f"{int(flipped.sum())} edges are traversed twice in the same direction"))
+    edge_id, uses, forward = _edge_uses(f)
+    nonmanifold, flipped = _edge_defects(uses, forward)
+    if nonmanifold:
+        out.append(finding("GEOM003", site, f"{nonmanifold} edges are shared by more than two faces"))
+    if flipped:
+        out.append(finding("GEOM004", site, f"{flipped} edges are traversed twice in the same direction"))
 
     labels = _components(int(weld.max()) + 1, f)
     edge_ok = (uses == 2) & (forward == 1)  # closed and consistently wound here
