@@ -61,6 +61,7 @@ def rejected(proc: subprocess.CompletedProcess, build: Path, before: dict, *word
         assert w in lines[0], (w, lines[0])
     after = snapshot(build)
     assert {k: after.get(k) for k in before} == before, "the previous build changed"
+    print(lines[0])  # shown by `pytest -rP`: what the user reads for this input
     return lines[0]
 
 

@@ -47,6 +47,21 @@ def test_every_used_asset_has_a_package_within_budget(sample):
             assert (sample / "models" / asset / rel).is_file()
 
 
+@pytest.mark.parametrize("fmt", ["sdf", "usda", "glb"])
+def test_every_sample_pose_matches_independent_pyproj(sample, fmt):
+    """All 787 placements, in each format, against the DXF through pyproj alone."""
+    from test_scene_e2e import angle_diff, gltf_poses, independent_poses, sdf_poses, usd_poses
+
+    truth = independent_poses(ROOT / "sources")
+    reader = {"sdf": sdf_poses, "usda": usd_poses, "glb": gltf_poses}[fmt]
+    got = reader(sample / "scene" / f"sample_substation.{fmt}")
+    got.pop("terrain", None)
+    assert set(got) == set(truth) and len(truth) == 787
+    metres = max(np.linalg.norm(got[tag][0] - p) for tag, (p, _) in truth.items())
+    degrees = max(angle_diff(got[tag][1], yaw) for tag, (_, yaw) in truth.items())
+    assert metres < 1e-3 and degrees < 1e-3, (metres, degrees)
+
+
 def test_validation_report_has_no_errors(sample):
     proc = twin("validate", "--sources", ROOT / "sources", "--out", sample)
     report = json.loads((sample / "reports" / "validation.json").read_text())

@@ -41,10 +41,13 @@ def independent_poses(sources: Path) -> dict[str, tuple[np.ndarray, float]]:
     def grid(x, y):
         return e0 + s * (x * math.cos(r) - y * math.sin(r)), n0 + s * (x * math.sin(r) + y * math.cos(r))
 
-    platforms = [np.array(p.get_points("xy")) * unit for p in doc.modelspace().query("LWPOLYLINE")]
-    pts = np.concatenate(platforms)
-    cx, cy = (pts.min(axis=0) + pts.max(axis=0)) / 2
-    lon0, lat0, h0 = to_geo.transform(*grid(cx, cy), min(elev.values()))
+    if "origin" in site:  # as given; by default the centre of the platforms, lowest level
+        lon0, lat0, h0 = site["origin"]["lon"], site["origin"]["lat"], site["origin"]["height"]
+    else:
+        platforms = [np.array(p.get_points("xy")) * unit for p in doc.modelspace().query("LWPOLYLINE")]
+        pts = np.concatenate(platforms)
+        cx, cy = (pts.min(axis=0) + pts.max(axis=0)) / 2
+        lon0, lat0, h0 = to_geo.transform(*grid(cx, cy), min(elev.values()))
     o = np.array(to_ecef.transform(lon0, lat0, h0))
     la, lo = math.radians(lat0), math.radians(lon0)
     rot = np.array([[-math.sin(lo), math.cos(lo), 0],

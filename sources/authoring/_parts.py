@@ -207,7 +207,9 @@ def shed_profile(r_core: float, r_big: float, r_small: float, z0: float, z1: flo
             (r_core, base + 0.05 * (r - r_core) / 0.1 + 0.015),
         ]
     pts += [(r_core, z1), (0.0, z1)]
-    return pts
+    # A big shed's top can meet the core exactly where the next shed starts: a
+    # repeated point would revolve into a ring of zero-area faces.
+    return [p for i, p in enumerate(pts) if i == 0 or math.dist(p, pts[i - 1]) > 1e-9]
 
 
 def insulator(name: str, base_center, height: float, r_core: float, r_big: float, mat: str,
@@ -237,7 +239,12 @@ def _polar(angle: float, r: float, z: float):
 
 def annular_sector(name: str, r_in: float, r_out: float, a0: float, a1: float, z: float, mat: str,
                    location, steps: int = 24):
-    """A flat ring sector in the local XY plane (angles from +Y, counter-clockwise)."""
+    """A flat ring sector in the local XY plane (angles from +Y, counter-clockwise);
+    with r_in = 0 a fan of triangles around one centre vertex."""
+    if r_in == 0.0:
+        verts = [(0.0, 0.0, z)] + [_polar(a0 + (a1 - a0) * i / steps, r_out, z) for i in range(steps + 1)]
+        faces = [(0, i + 1, i + 2) for i in range(steps)]
+        return mesh(name, verts, faces, mat, location, DIAL_ROTATION)
     verts, faces = [], []
     for i in range(steps + 1):
         a = a0 + (a1 - a0) * i / steps
