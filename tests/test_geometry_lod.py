@@ -113,6 +113,8 @@ def test_lod_of_touching_cad_parts_adds_no_edge_defect_to_any_part():
         asset = step(asset)
     simplified = 0
     for _, vis in asset.visuals():
+        counts = [m.triangle_count for m in vis.lods]
+        assert counts == sorted(counts, reverse=True), (vis.name, counts)  # coarser never grows
         authored = edge_defect_counts(vis.lods[0])
         for mesh in vis.lods[1:]:
             non_manifold, wound = edge_defect_counts(mesh)

@@ -35,7 +35,7 @@ import numpy as np
 from .. import ir
 from ..errors import UserError
 from . import clean as _clean
-from .metrics import SurfaceDistance, face_normals, query_points, vertex_normals
+from .metrics import SurfaceDistance, face_normals, query_points, query_points_on, vertex_normals
 from .transform import linear_scale
 
 METHODS = ("meshoptimizer", "pymeshlab", "fast_simplification")
@@ -239,10 +239,9 @@ class _Judge:
         welded = vertex_normals(vertices, topo)
         self.normals = welded[_clean.weld_map(vertices, _clean.weld_tolerance(vertices))]
         self.fans = _vertex_fans(vertices, faces)
-        self.queries = query_points(vertices, faces, samples)  # the original side, reused
-        self.query_vertex = np.full(len(self.queries), -1, dtype=np.int64)  # which are vertices
-        used = np.unique(faces.ravel())
-        self.query_vertex[:len(used)] = used
+        # the original side's query points, reused: which vertex or face each lies on
+        self.queries, self.query_vertex, self.query_face = query_points_on(vertices, faces, samples)
+        self.face_keys = _face_keys(faces, len(vertices))
         self._vertex_tree = None
 
     def near_vertices(self, points: np.ndarray, k: int = 4) -> np.ndarray:
@@ -277,14 +276,23 @@ class _Judge:
             how_far.append(np.full(len(bad[0]), np.inf))
         else:
             flips = flipped_face_count(self.reference, v, f, tolerance)
+        if kept is not None:  # vertices are the original ones: so are some faces
+            cand_keys = _face_keys(kept[f], len(self.vertices))
         used, f = _clean.compact(f, len(v))
         v = v[used]
         kept = None if kept is None else kept[used]
         queries = self.queries
-        if kept is not None:  # a kept original vertex lies on both surfaces
+        own, own_vertex, own_face = query_points_on(v, f, self.samples)
+        if kept is not None and cand_keys is not None and self.face_keys is not None:
+            # A point on a face both meshes share, or on an original vertex, is at
+            # distance 0 from both surfaces: measuring it cannot change the maximum.
+            shared = np.isin(self.face_keys, cand_keys)
+            skip = np.isin(self.query_vertex, kept) | ((self.query_face >= 0) & shared[self.query_face])
+            queries = queries[~skip]
+            own = own[(own_vertex < 0) & ~((own_face >= 0) & np.isin(cand_keys, self.face_keys)[own_face])]
+        elif kept is not None:
             queries = queries[~np.isin(self.query_vertex, kept)]
         target = SurfaceDistance(v, f, self.reference.origin)
-        own = query_points(v, f, self.samples)
         d_there, d_back = target(queries), self.reference(own)
         there = float(d_there.max(initial=0.0))
         back = float(d_back.max(initial=0.0))
@@ -303,10 +311,20 @@ class _Judge:
         return Simplified(v, f, kept, max(there, back), flips, added), where
 
 
-def _search_meshopt(judge: _Judge, budget: float, iterations: int,
-                    lock: np.ndarray | None = None) -> tuple[Simplified | None, np.ndarray]:
+def _face_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray | None:
+    """(m,) int64 key of each face's vertex set (winding and rotation ignored: the same
+    surface), or None when the keys would not fit in 63 bits."""
+    if n_vertices >= 2_000_000:
+        return None
+    f = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
+    return (f[:, 0] * n_vertices + f[:, 1]) * n_vertices + f[:, 2]
+
+
+def _search_meshopt(judge: _Judge, budget: float, iterations: int, lock: np.ndarray | None = None,
+                    ceiling: int | None = None) -> tuple[Simplified | None, np.ndarray]:
     """Coarsest meshoptimizer result whose measurement is within budget, and the
-    vertex lock that produced it (`lock`: a finer level's, to start from).
+    vertex lock that produced it (`lock`: a finer level's, to start from; `ceiling`:
+    the finer level's face count, which a result must beat to be worth measuring).
 
     meshoptimizer's error is an area-weighted MEAN of squared distances to the planes
     around a vertex, so a vertex may slide off a narrow face (a bevel, a fin's rim, a
@@ -323,6 +341,8 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
     widespread = np.zeros((0, 3))  # misses left unlocked while a lower target was tried
     for round_ in range(iterations):
         v, f = _meshopt(judge.vertices, judge.faces, 0, s, lock)
+        if ceiling is not None and len(f) >= ceiling:
+            break  # no finer than the finer level already is, and rounds only add faces
         if len(f) >= NO_GAIN * n:
             if len(widespread) == 0:
                 break  # the mesh is as simple as this error allows: nothing to gain
@@ -333,10 +353,10 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
             continue
         r, where = judge.measure(v, f, np.arange(len(v)), budget, threshold=LOCK_SHARE * budget)
         if r.valid and r.error_m <= budget:
-            if best is None or len(r.faces) < len(best.faces):
-                best, best_lock = r, lock.copy()
-            if len(where) == 0:
-                break
+            # the first pass is the coarsest: later rounds only lock more vertices or
+            # lower the target, and both keep more faces
+            best, best_lock = r, lock.copy()
+            break
         if not np.isfinite(r.error_m):  # everything collapsed away
             s /= 4.0
             continue
@@ -424,7 +444,8 @@ def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: 
     judge = _Judge(local[first], welded_index[faces], samples)
     lock = None
     for budget in budgets_m:
-        best, lock = _search_meshopt(judge, budget, iterations, lock) if budget > 0 else (None, lock)
+        best, lock = (_search_meshopt(judge, budget, iterations, lock, len(prev.faces)) if budget > 0
+                      else (None, lock))
         if best is not None and len(best.faces) < len(prev.faces):
             corners = _original_corners(best.kept[best.faces], welded_index, local, normals)
             used, new_faces = _clean.compact(corners, len(vertices))
@@ -578,9 +599,9 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
         for v in group:
             finer = chains[v.name][-1]
             mesh = per_visual.get(v.name)
-            if mesh is None or _adds_errors(finer, mesh, known):
-                # a part never vanishes nor collapses flat: it keeps its finer level,
-                # whose error is within the finer (smaller) budget
+            if mesh is None or mesh.triangle_count >= finer.triangle_count or _adds_errors(finer, mesh, known):
+                # a part never vanishes, collapses flat, or grows at a coarser level: it
+                # keeps its finer level, whose error is within the finer (smaller) budget
                 mesh = finer
                 errors[i] = max(errors[i], errors[i - 1] if i else 0.0)
             chains[v.name].append(mesh)
@@ -612,8 +633,10 @@ def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh, known: dict) -> bool:
 
     def verdict(mesh):
         if id(mesh) not in known:
-            errors = {f.code for f in mesh_findings(mesh, "") if f.severity == "error"}
-            known[id(mesh)] = (mesh, errors, edge_defect_counts(mesh))
+            found = mesh_findings(mesh, "")
+            errors = {f.code for f in found if f.severity == "error"}
+            edges = edge_defect_counts(mesh) if any(f.code in ("GEOM003", "GEOM004") for f in found) else (0, 0)
+            known[id(mesh)] = (mesh, errors, edges)
         return known[id(mesh)][1:]
 
     (coarse_errors, coarse_edges), (fine_errors, fine_edges) = verdict(coarser), verdict(finer)

@@ -116,14 +116,25 @@ def query_points(vertices: np.ndarray, faces: np.ndarray, samples: int = DEFAULT
     """The points (k, 3) at which a surface is measured: used vertices, area-weighted
     samples, and face centroids when there are fewer faces than samples (a coarse
     mesh deviates most in its face interiors; a fine one is covered by its vertices)."""
+    return query_points_on(vertices, faces, samples, seed)[0]
+
+
+def query_points_on(vertices: np.ndarray, faces: np.ndarray, samples: int = DEFAULT_SAMPLES, seed: int = 0
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`query_points` (p, 3) with where each lies: the vertex it is (p,) int64, -1 for
+    the others, and the face it lies on (p,) int64, -1 for the vertices."""
     if len(faces) == 0:
-        return np.zeros((0, 3))
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     used = np.unique(faces.ravel())
-    pts, _ = sample_surface(vertices, faces, samples, seed)
-    parts = [vertices[used], pts]
+    pts, on_face = sample_surface(vertices, faces, samples, seed)
+    parts, face_ids = [vertices[used], pts], [np.full(len(used), -1, dtype=np.int64), on_face]
     if len(faces) <= samples:
         parts.append(vertices[faces].mean(axis=1))
-    return np.concatenate(parts)
+        face_ids.append(np.arange(len(faces), dtype=np.int64))
+    face = np.concatenate(face_ids)
+    vertex = np.full(len(face), -1, dtype=np.int64)
+    vertex[:len(used)] = used
+    return np.concatenate(parts), vertex, face
 
 
 def one_sided_hausdorff(src_v: np.ndarray, src_f: np.ndarray, dst: SurfaceDistance,
