@@ -56,7 +56,8 @@ RULES: dict[str, tuple[str, str, str]] = {
     "HIER012": ("error", "hierarchy", "path-like name (/, \\, .. or :) that could leave an output folder"),
     "PLACE001": ("error", "placement", "INSERT of an unknown asset block"),
     "PLACE002": ("error", "placement", "duplicate TAG"),
-    "PLACE003": ("error", "placement", "placement outside every platform of its level"),
+    "PLACE003": ("warning", "placement", "placement outside every platform of its level (on a slope or natural "
+                                         "ground: PLACE005 still checks that it stands on the terrain)"),
     "PLACE004": ("warning", "placement", "footprints overlap beyond tolerance"),
     "PLACE005": ("error", "placement", "base not on the terrain (over 1 cm)"),
     "PKG001": ("error", "package", "XML file not well-formed"),
