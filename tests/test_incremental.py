@@ -119,3 +119,32 @@ def test_sample_one_asset_edit_reexports_only_its_chain(tmp_path):
     nudge_stl(sources / "assets" / "junction_box" / "junction_box.stl")
     edit = explain(sources, out, "--cache", cache)
     assert ran(edit) == {"asset:junction_box", "scene"}
+
+
+def test_floorplan_memo_skips_the_dxf_until_it_changes(tmp_path, monkeypatch):
+    """A no-op build plans from the memo of the last floor plan read (no DXF parse);
+    a new DXF content or a new set of levels reads the drawing again."""
+    from pipeline.builder import tasks
+    from pipeline.ingest import floorplan
+
+    sources = mini_sources.make(tmp_path / "src")
+    memo = tmp_path / "build" / tasks.FLOORPLAN_MEMO
+    first = tasks.load_sources(sources, memo=memo).floorplan
+    assert memo.is_file()
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the DXF was parsed again")
+
+    real = floorplan.read_floorplan
+    monkeypatch.setattr(floorplan, "read_floorplan", refuse)
+    again = tasks.load_sources(sources, memo=memo).floorplan
+    assert again.placements == first.placements and again.ignored == first.ignored
+    assert all(np.array_equal(a.outline, b.outline) for a, b in zip(again.platforms, first.platforms))
+
+    moved = [(t, a, lv, x + 1.0, y, z, r) for t, a, lv, x, y, z, r in mini_sources.PLACEMENTS]
+    mini_sources.write_plan(sources / "floorplan" / "plan.dxf", moved)
+    with pytest.raises(AssertionError, match="parsed again"):
+        tasks.load_sources(sources, memo=memo)
+    monkeypatch.setattr(floorplan, "read_floorplan", real)
+    edited = tasks.load_sources(sources, memo=memo).floorplan
+    assert [p.x for p in edited.placements] == [p.x + 1.0 for p in first.placements]
