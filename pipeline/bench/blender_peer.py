@@ -68,9 +68,10 @@ def blender_section(ctx: Context) -> dict:
     a = _blender("assemble", str(built), str(work), str(repeats), "glb", timeout=ctx.pick(300.0, 600.0))
     if "timeout_s" in a:
         raise RuntimeError(f"Blender's glTF export of the whole scene did not finish in {a['timeout_s']:.0f} s")
-    # Blender's USD export of the sample took > 5 min and > 8 GB here: capped, and a
-    # timeout is recorded as the figure it is
-    u = _blender("assemble", str(built), str(work), str(repeats), "usd", timeout=ctx.pick(120.0, 240.0))
+    # Blender's USD export of the sample took > 5 min and > 8 GB here: capped (the cap
+    # includes assembling the scene again, ~100 s), and a timeout is recorded as the
+    # figure it is; a higher cap only spends the bench's 20 minutes on a known answer
+    u = _blender("assemble", str(built), str(work), str(repeats), "usd", timeout=ctx.pick(120.0, 150.0))
     ctx.shared["blender_glb"] = a["file"]
     ours = {p.suffix: p for p in sorted((built / "scene").iterdir()) if p.suffix in (".glb", ".usda")}
     files = {"empty (bpy baseline)": Path("none"), "blender_monolithic.glb": Path(a["file"])}
