@@ -176,6 +176,28 @@ def test_render_mapping_follows_the_binding():
     assert nodes.unbound_inputs(["reactor.oil", "reactor.oli", "other.oil"], [ob]) == ["other.oil", "reactor.oli"]
 
 
+def test_visual_mapper_maps_only_what_changed():
+    def gauge(target):
+        return {"variable": "oil", "effect": "rotate", "target": target, "link": "base", "domain": [0, 100],
+                "range": [0.0, 4.0], "axis": [0, 0, 1]}
+
+    obs = [nodes.Observed(f"R{i}", f"reactor_{i}", "asset", {"bindings": [gauge("ptr")]}) for i in range(3)]
+    mapper = nodes.VisualMapper(obs)
+    values = {f"reactor_{i}": {"oil": 40.0 + i} for i in range(3)}
+    first = mapper.states(values)
+    assert mapper.mapped == 3
+    values["reactor_1"] = {"oil": 90.0}
+    second = mapper.states(values)
+    assert mapper.mapped == 1
+    assert second[0] is first[0] and second[2] is first[2]
+    fresh = nodes.visual_states(values, obs)
+    for a, b in zip(second, fresh):
+        assert (a.tag, a.visual) == (b.tag, b.visual)
+        np.testing.assert_array_equal(a.transform, b.transform)
+    mapper.states(values)
+    assert mapper.mapped == 0
+
+
 def test_oil_leak_sun_is_at_the_sample_site_origin():
     site = ROOT / "sources" / "site.toml"
     if not site.is_file():

@@ -432,32 +432,60 @@ def visual_states(values: dict[str, dict[str, float]], observed: list[Observed])
     values: STATE -> variable -> value. Visuals whose variables are not fed are left
     out (they keep their rest look). Sorted by (tag, link, visual).
     """
-    out = []
-    for ob in sorted(observed, key=lambda o: o.tag):
-        fed = values.get(ob.state, {})
-        by_visual: dict[tuple[str, str], list[dict]] = {}
-        for rec in ob.manifest.get("bindings", []):
-            if rec["variable"] in fed and rec.get("link"):
-                by_visual.setdefault((rec["link"], rec["target"]), []).append(rec)
-        for (link, visual), recs in sorted(by_visual.items()):
-            rest = _compiled(recs[0]).rest
-            m, material, weights, outs = rest.copy(), None, {}, []
-            for rec in recs:
-                c = _compiled(rec)
-                b = c.binding
-                value = fed[b.variable]
-                y = b.output(value)
-                outs.append(BindingOutput(rec, value, y))
-                if b.effect == "material":
-                    material = b.materials[y] if b.materials else None
-                elif b.effect == "shape":
-                    weights[b.shape_key or ""] = float(y)
-                elif b.effect == "rotate":  # delta_matrix's Rodrigues, with K precomputed
-                    m[:3, :3] = m[:3, :3] @ (_I3 + math.sin(y) * c.k + (1.0 - math.cos(y)) * c.k2)
-                else:
-                    m = m @ delta_matrix(b.effect, b.axis, float(y))
-            out.append(VisualState(ob.tag, link, visual, rest, m, material, weights, tuple(outs)))
-    return out
+    return VisualMapper(observed).states(values)
+
+
+class VisualMapper:
+    """`visual_states` for a run: the bindings are grouped per visual once, and a
+    visual whose fed values did not change since the last call keeps its state, so
+    a step that moves one gauge maps one gauge (DESIGN.md s.6: only the affected
+    subgraph is recomputed, the render node's mapping included)."""
+
+    def __init__(self, observed: list[Observed]):
+        self.groups = []  # (observed, link, visual, records), sorted by (tag, link, visual)
+        for ob in sorted(observed, key=lambda o: o.tag):
+            by_visual: dict[tuple[str, str], list[dict]] = {}
+            for rec in ob.manifest.get("bindings", []):
+                if rec.get("link"):
+                    by_visual.setdefault((rec["link"], rec["target"]), []).append(rec)
+            self.groups += [(ob, link, visual, recs) for (link, visual), recs in sorted(by_visual.items())]
+        self._last: dict[int, tuple[tuple, VisualState]] = {}  # group index -> (inputs, state)
+        self.mapped = 0  # visuals mapped anew by the last call
+
+    def states(self, values: dict[str, dict[str, float]]) -> list[VisualState]:
+        out, self.mapped = [], 0
+        for i, (ob, link, visual, recs) in enumerate(self.groups):
+            fed = values.get(ob.state, {})
+            recs = [r for r in recs if r["variable"] in fed]
+            if not recs:
+                continue
+            inputs = tuple((r["variable"], fed[r["variable"]]) for r in recs)
+            last = self._last.get(i)
+            if last is None or last[0] != inputs:
+                last = self._last[i] = (inputs, _map_visual(ob.tag, link, visual, recs, fed))
+                self.mapped += 1
+            out.append(last[1])
+        return out
+
+
+def _map_visual(tag: str, link: str, visual: str, recs: list[dict], fed: dict[str, float]) -> VisualState:
+    rest = _compiled(recs[0]).rest
+    m, material, weights, outs = rest.copy(), None, {}, []
+    for rec in recs:
+        c = _compiled(rec)
+        b = c.binding
+        value = fed[b.variable]
+        y = b.output(value)
+        outs.append(BindingOutput(rec, value, y))
+        if b.effect == "material":
+            material = b.materials[y] if b.materials else None
+        elif b.effect == "shape":
+            weights[b.shape_key or ""] = float(y)
+        elif b.effect == "rotate":  # delta_matrix's Rodrigues, with K precomputed
+            m[:3, :3] = m[:3, :3] @ (_I3 + math.sin(y) * c.k + (1.0 - math.cos(y)) * c.k2)
+        else:
+            m = m @ delta_matrix(b.effect, b.axis, float(y))
+    return VisualState(tag, link, visual, rest, m, material, weights, tuple(outs))
 
 
 def unbound_inputs(values_ports: list[str], observed: list[Observed]) -> list[str]:

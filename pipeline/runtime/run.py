@@ -71,10 +71,11 @@ def simulate(scenario: graph.Scenario, observed: list[nodes.Observed]) -> tuple[
             raise UserError(scenario.path, f"node {render.id}",
                             f"no placement in the built scene binds {', '.join(bad)} (STATE.variable)")
     engine = graph.Engine(g)
+    mapper = nodes.VisualMapper(observed)
     times, frames, sun, records = [], [], [] if sun_id else None, []
     for report in engine.run():
         times.append(report.t)
-        frames.append(nodes.visual_states(render.values, observed) if render is not None else [])
+        frames.append(mapper.states(render.values) if render is not None else [])
         if sun_id:
             v = engine.values
             sun.append((v[(sun_id, "elevation")], v[(sun_id, "azimuth")], v[(sun_id, "irradiance")]))
