@@ -128,7 +128,7 @@ def test_floorplan_memo_skips_the_dxf_until_it_changes(tmp_path, monkeypatch):
     from pipeline.ingest import floorplan
 
     sources = mini_sources.make(tmp_path / "src")
-    memo = tmp_path / "build" / tasks.FLOORPLAN_MEMO
+    memo = tmp_path / "build" / floorplan.MEMO_NAME
     first = tasks.load_sources(sources, memo=memo).floorplan
     assert memo.is_file()
 

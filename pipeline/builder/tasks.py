@@ -137,72 +137,26 @@ def scenario_assets(sources: Path) -> set[str]:
 def load_sources(sources: Path, memo: Path | None = None) -> Plan:
     """What the sources hold. `memo`: a file where the floor plan read last time is
     kept with its key, so that a no-op build does not parse the DXF again."""
+    from ..ingest.floorplan import read_floorplan_memo
+
     sources = Path(sources)
     site = config.load_site(sources / "site.toml")
     assets, problems = config.load_assets(sources)
     if problems:
         raise problems[0]
     plan_path = site.root / site.floorplan
-    fp = _read_floorplan_memo(plan_path, set(assets), set(site.level_names), memo)
+    fp = read_floorplan_memo(plan_path, set(assets), set(site.level_names), memo)
     placed = {p.asset_id for p in fp.placements}
     used = sorted(placed | (scenario_assets(sources) & set(assets)))
     unused = sorted(set(assets) - set(used))
     return Plan(site=site, floorplan=fp, assets=assets, used=used, unused=unused)
 
 
-FLOORPLAN_MEMO = ".floorplan.json"
-
-
-def _read_floorplan_memo(path: Path, assets: set[str], levels: set[str], memo: Path | None) -> ir.FloorPlan:
-    """read_floorplan, or its result from `memo` when the DXF's content, the known
-    assets and levels and the reader's code are what they were. Only successful reads
-    are kept (a bad plan raises its error every time), as JSON: a build folder may be
-    shared, so nothing in it is unpickled."""
-    import hashlib
-    import json
-    import os
-
-    key = None
-    if memo is not None and path.is_file():
-        h = hashlib.sha256(path.read_bytes())
-        h.update(json.dumps([sorted(assets), sorted(levels), str(path),
-                             code_version("pipeline.ir", "pipeline.ingest.floorplan")]).encode())
-        key = h.hexdigest()
-        try:
-            doc = json.loads(memo.read_text())
-            if doc.get("key") == key:
-                return _floorplan_from_json(doc["floorplan"])
-        except (OSError, ValueError, KeyError, TypeError):
-            pass
-    from ..ingest.floorplan import read_floorplan
-
-    fp = read_floorplan(path, known_assets=assets, levels=levels)
-    if key is not None:
-        memo.parent.mkdir(parents=True, exist_ok=True)
-        tmp = memo.with_name(f"{memo.name}.tmp-{os.getpid()}")
-        tmp.write_text(json.dumps({"key": key, "floorplan": _floorplan_to_json(fp)}, sort_keys=True))
-        os.replace(tmp, memo)
-    return fp
-
-
-def _floorplan_to_json(fp: ir.FloorPlan) -> dict:
-    from dataclasses import asdict
-
-    return {"path": fp.path, "units": fp.units, "placements": [asdict(p) for p in fp.placements],
-            "platforms": [{"level": p.level, "outline": p.outline.tolist(), "handle": p.handle} for p in fp.platforms],
-            "ignored": [list(i) for i in fp.ignored]}
-
-
-def _floorplan_from_json(d: dict) -> ir.FloorPlan:
-    return ir.FloorPlan(path=d["path"], units=d["units"],
-                        placements=tuple(ir.Placement(**p) for p in d["placements"]),
-                        platforms=tuple(ir.Platform(p["level"], p["outline"], p["handle"]) for p in d["platforms"]),
-                        ignored=tuple((str(k), int(n)) for k, n in d["ignored"]))
-
-
 def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
     """The task graph for a sources folder. `only`: just these assets' packages."""
-    p = load_sources(sources, memo=Path(build) / FLOORPLAN_MEMO)
+    from ..ingest.floorplan import MEMO_NAME
+
+    p = load_sources(sources, memo=Path(build) / MEMO_NAME)
     wanted = p.used
     if only:
         for a in only:

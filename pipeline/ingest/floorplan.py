@@ -187,3 +187,54 @@ def points_in_polygon(points, outline) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         xint = a[:, 0] + (py - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
     return (crosses & (px < xint)).sum(axis=1) % 2 == 1
+
+
+# --- memo -------------------------------------------------------------------------
+
+MEMO_NAME = ".floorplan.json"  # in a build folder: the planner writes it, the scene tasks reuse it
+
+
+def read_floorplan_memo(path: Path, assets: set[str], levels: set[str], memo: Path | None) -> ir.FloorPlan:
+    """read_floorplan, or its result from `memo` when the DXF's content, the known
+    assets and levels and the reader's code are what they were. Only successful reads
+    are kept (a bad plan raises its error every time), as JSON: a build folder may be
+    shared, so nothing in it is unpickled."""
+    import hashlib
+    import json
+    import os
+
+    key = None
+    if memo is not None and path.is_file():
+        h = hashlib.sha256(path.read_bytes())
+        h.update(json.dumps([sorted(assets), sorted(levels), str(path)]).encode())
+        for module in (Path(__file__), Path(ir.__file__)):  # the reader's code
+            h.update(module.read_bytes())
+        key = h.hexdigest()
+        try:
+            doc = json.loads(memo.read_text())
+            if doc.get("key") == key:
+                return _floorplan_from_json(doc["floorplan"])
+        except (OSError, ValueError, KeyError, TypeError):
+            pass
+    fp = read_floorplan(path, known_assets=assets, levels=levels)
+    if key is not None:
+        memo.parent.mkdir(parents=True, exist_ok=True)
+        tmp = memo.with_name(f"{memo.name}.tmp-{os.getpid()}")
+        tmp.write_text(json.dumps({"key": key, "floorplan": _floorplan_to_json(fp)}, sort_keys=True))
+        os.replace(tmp, memo)
+    return fp
+
+
+def _floorplan_to_json(fp: ir.FloorPlan) -> dict:
+    from dataclasses import asdict
+
+    return {"path": fp.path, "units": fp.units, "placements": [asdict(p) for p in fp.placements],
+            "platforms": [{"level": p.level, "outline": p.outline.tolist(), "handle": p.handle} for p in fp.platforms],
+            "ignored": [list(i) for i in fp.ignored]}
+
+
+def _floorplan_from_json(d: dict) -> ir.FloorPlan:
+    return ir.FloorPlan(path=d["path"], units=d["units"],
+                        placements=tuple(ir.Placement(**p) for p in d["placements"]),
+                        platforms=tuple(ir.Platform(p["level"], p["outline"], p["handle"]) for p in d["platforms"]),
+                        ignored=tuple((str(k), int(n)) for k, n in d["ignored"]))

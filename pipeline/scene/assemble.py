@@ -28,13 +28,14 @@ def terrain_model_name(site: config.Site) -> str:
     return f"{site.name.lower().replace('-', '_').replace('.', '_')}_terrain"
 
 
-def _load(sources: Path):
+def _load(sources: Path, build: Path | None = None):
     from ..georef import Georeferencer, default_origin
-    from ..ingest.floorplan import read_floorplan
+    from ..ingest.floorplan import MEMO_NAME, read_floorplan_memo
 
     site = config.load_site(Path(sources) / "site.toml")
     assets, _ = config.load_assets(Path(sources))
-    fp = read_floorplan(site.root / site.floorplan, known_assets=set(assets), levels=set(site.level_names))
+    memo = None if build is None else Path(build) / MEMO_NAME
+    fp = read_floorplan_memo(site.root / site.floorplan, set(assets), set(site.level_names), memo)
     origin = site.origin or default_origin(site, fp.platforms)
     return site, fp, Georeferencer(site, origin)
 
@@ -56,12 +57,12 @@ def scene_sun(site: config.Site, origin_llh) -> dict:
             "time_utc": when.isoformat()}
 
 
-def build_terrain(staging: Path, sources: str) -> dict:
+def build_terrain(staging: Path, sources: str, build: str | None = None) -> dict:
     """Task action: the terrain package (all formats) into models/<site>_terrain/."""
     from ..builder.tasks import write_package
     from ..export import manifest
 
-    site, fp, georef = _load(Path(sources))
+    site, fp, georef = _load(Path(sources), build and Path(build))
     name = terrain_model_name(site)
     asset = terrain_asset(site, list(fp.platforms), georef, name)
     models = Path(staging) / "models"
@@ -77,7 +78,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     from ..export import manifest
     from .terrain import height_at
 
-    site, fp, georef = _load(Path(sources))
+    site, fp, georef = _load(Path(sources), Path(build))
     models = Path(build) / "models"
     used = sorted({p.asset_id for p in fp.placements})
     manifests = {a: manifest.read(models / a) for a in used}
@@ -155,7 +156,8 @@ def scene_task_specs(plan, sources: Path, build: Path, code: str) -> list[Task]:
     sources = Path(sources).resolve()
     inputs = (site.path.resolve(), (site.root / site.floorplan).resolve(), *(
         cfg.path.resolve() for cfg in plan.assets.values()))
-    terrain = Task(name="terrain", stage="terrain", action=build_terrain, args={"sources": str(sources)},
+    terrain = Task(name="terrain", stage="terrain", action=build_terrain,
+                   args={"sources": str(sources), "build": str(Path(build).resolve())},
                    inputs=inputs[:2], params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
     placed_assets = sorted({p.asset_id for p in plan.floorplan.placements})
     scene = Task(name="scene", stage="scene", action=build_scene,
