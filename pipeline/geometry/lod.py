@@ -35,7 +35,7 @@ import numpy as np
 from .. import ir
 from ..errors import UserError
 from . import clean as _clean
-from .metrics import SurfaceDistance, face_normals, query_points, query_points_on, vertex_normals
+from .metrics import SurfaceDistance, face_normals, query_points_on, vertex_normals
 from .transform import linear_scale
 
 METHODS = ("meshoptimizer", "pymeshlab", "fast_simplification")
@@ -276,14 +276,14 @@ class _Judge:
             how_far.append(np.full(len(bad[0]), np.inf))
         else:
             flips = flipped_face_count(self.reference, v, f, tolerance)
-        if kept is not None:  # vertices are the original ones: so are some faces
-            cand_keys = _face_keys(kept[f], len(self.vertices))
+        # vertices are the original ones (meshoptimizer): so are some faces
+        cand_keys = None if kept is None else _face_keys(kept[f], len(self.vertices))
         used, f = _clean.compact(f, len(v))
         v = v[used]
         kept = None if kept is None else kept[used]
         queries = self.queries
         own, own_vertex, own_face = query_points_on(v, f, self.samples)
-        if kept is not None and cand_keys is not None and self.face_keys is not None:
+        if cand_keys is not None and self.face_keys is not None:
             # A point on a face both meshes share, or on an original vertex, is at
             # distance 0 from both surfaces: measuring it cannot change the maximum.
             shared = np.isin(self.face_keys, cand_keys)
