@@ -2,7 +2,8 @@
 whole scene as ONE file (the study's rejected monolithic approach), and how long
 Blender takes to load each result. Not imported by the pipeline; run as
 
-    python -m pipeline.bench.blender_script assemble BUILT OUTDIR REPEATS glb|usd
+    python -m pipeline.bench.blender_script assemble BUILT OUTDIR REPEATS
+    python -m pipeline.bench.blender_script usd BLEND OUTDIR
     python -m pipeline.bench.blender_script load FILE
     python -m pipeline.bench.blender_script reexport BUILT ASSET OUTDIR STEPS
 
@@ -11,7 +12,10 @@ and prints one line `BENCH_JSON {...}`.
 assemble: import each used model's .glb once (LOD0, as authored), then one linked
 duplicate of its object tree per placement (objects share mesh data, as Alt+D does)
 at the placement's ENU pose from scene/placements.json, plus the terrain; then time
-`export_scene.gltf` (GLB) or `wm.usd_export` of the whole scene (one format per run).
+`export_scene.gltf` (GLB) of the whole scene, and save it as a .blend for `usd`.
+usd: open that .blend and time `wm.usd_export` of the whole scene (its own process:
+Blender's USD export of the sample took > 5 min and > 8 GB, so the driver caps it
+without losing the glTF figures, and without assembling the scene again).
 load: a fresh Blender imports FILE (glTF or USD, default options); seconds and this
 process's peak RSS (`load none` gives bpy's own baseline).
 reexport: the study's runtime: at every state step, change the indicator (the
@@ -53,7 +57,7 @@ def _duplicate(bpy, objects: list, collection) -> dict:
     return mapping
 
 
-def assemble(built: Path, outdir: Path, repeats: int, fmt: str = "glb") -> dict:
+def assemble(built: Path, outdir: Path, repeats: int) -> dict:
     import bpy
     from mathutils import Matrix
 
@@ -82,21 +86,33 @@ def assemble(built: Path, outdir: Path, repeats: int, fmt: str = "glb") -> dict:
     bpy.context.view_layer.update()
     assemble_s = time.perf_counter() - t0
     outdir.mkdir(parents=True, exist_ok=True)
-    # one format per process: Blender's USD export of the sample took > 5 min and > 8 GB,
-    # so the driver caps it separately without losing the glTF figures
-    dst = outdir / ("blender_monolithic.glb" if fmt == "glb" else "blender_monolithic.usdc")
+    dst = outdir / "blender_monolithic.glb"
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        if fmt == "glb":
-            bpy.ops.export_scene.gltf(filepath=str(dst), export_format="GLB")
-        else:
-            bpy.ops.wm.usd_export(filepath=str(dst))
+        bpy.ops.export_scene.gltf(filepath=str(dst), export_format="GLB")
         times.append(time.perf_counter() - t0)
+    maxrss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    blend = outdir / "blender_monolithic.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), compress=False)
     return {"assemble_s": assemble_s, "objects": len(bpy.data.objects), "meshes": len(bpy.data.meshes),
             "placements": len(record["placements"]), "export_s": times, "file": str(dst),
-            "bytes": dst.stat().st_size, "maxrss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+            "bytes": dst.stat().st_size, "maxrss_bytes": maxrss, "blend": str(blend),
             "blender": bpy.app.version_string}
+
+
+def usd(blend: Path, outdir: Path) -> dict:
+    import bpy
+
+    t0 = time.perf_counter()
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False, use_scripts=False)
+    open_s = time.perf_counter() - t0
+    dst = outdir / "blender_monolithic.usdc"
+    t0 = time.perf_counter()
+    bpy.ops.wm.usd_export(filepath=str(dst))
+    export_s = time.perf_counter() - t0
+    return {"open_s": open_s, "export_s": [export_s], "file": str(dst), "bytes": dst.stat().st_size,
+            "maxrss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024}
 
 
 def load(path: str) -> dict:
@@ -143,7 +159,9 @@ def reexport(built: Path, asset: str, outdir: Path, steps: int) -> dict:
 if __name__ == "__main__":
     mode, *args = sys.argv[1:]
     if mode == "assemble":
-        _emit(assemble(Path(args[0]), Path(args[1]), int(args[2]), args[3] if len(args) > 3 else "glb"))
+        _emit(assemble(Path(args[0]), Path(args[1]), int(args[2])))
+    elif mode == "usd":
+        _emit(usd(Path(args[0]), Path(args[1])))
     elif mode == "load":
         _emit(load(args[0]))
     elif mode == "reexport":
