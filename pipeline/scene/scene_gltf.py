@@ -80,20 +80,30 @@ def quat_to_matrix(q) -> np.ndarray:
 
 def matrix_to_quat(r: np.ndarray) -> np.ndarray:
     """(x, y, z, w) of a 3x3 rotation; Shepperd's method for stability."""
-    t = np.trace(r)
-    if t > 0:
-        s = np.sqrt(t + 1.0) * 2
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = np.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k]) * 2
-        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
-        q[i] = 0.25 * s
-        q[j] = (r[j, i] + r[i, j]) / s
-        q[k] = (r[k, i] + r[i, k]) / s
-    q = np.array(q)
-    return q / np.linalg.norm(q) * (1 if q[3] >= 0 else -1)
+    return matrices_to_quats(np.asarray(r, dtype=np.float64)[None])[0]
+
+
+def matrices_to_quats(r: np.ndarray) -> np.ndarray:
+    """(k, 4) unit quaternions (x, y, z, w), w >= 0, of rotations r: (k, 3, 3).
+    Shepperd's method: each matrix takes the branch of its largest of (trace, diagonal),
+    so no branch divides by a small number."""
+    r = np.asarray(r, dtype=np.float64).reshape(-1, 3, 3)
+    d0, d1, d2 = r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]
+    t = d0 + d1 + d2
+    with np.errstate(invalid="ignore", divide="ignore"):  # the branches not taken
+        sw, s0 = np.sqrt(t + 1.0) * 2, np.sqrt(1.0 + d0 - d1 - d2) * 2
+        s1, s2 = np.sqrt(1.0 + d1 - d0 - d2) * 2, np.sqrt(1.0 + d2 - d0 - d1) * 2
+        a01, a02, a12 = r[:, 0, 1] + r[:, 1, 0], r[:, 0, 2] + r[:, 2, 0], r[:, 1, 2] + r[:, 2, 1]
+        w21, w02, w10 = r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]
+        branches = np.stack([
+            np.stack([w21 / sw, w02 / sw, w10 / sw, 0.25 * sw], axis=1),
+            np.stack([0.25 * s0, a01 / s0, a02 / s0, w21 / s0], axis=1),
+            np.stack([a01 / s1, 0.25 * s1, a12 / s1, w02 / s1], axis=1),
+            np.stack([a02 / s2, a12 / s2, 0.25 * s2, w10 / s2], axis=1)])
+    pick = np.where(t > 0, 0, 1 + np.argmax(np.stack([d0, d1, d2], axis=1), axis=1))
+    q = branches[pick, np.arange(len(r))]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q * np.where(q[:, 3:4] >= 0, 1.0, -1.0)
 
 
 def visual_nodes(doc: dict) -> list[tuple[int, np.ndarray]]:
@@ -182,15 +192,13 @@ class SceneBuilder:
 
     def instance_accessors(self, matrices: list[np.ndarray]) -> dict[str, int]:
         """TRANSLATION / ROTATION / SCALE accessors of instance transforms (Y-up)."""
-        t = np.array([m[:3, 3] for m in matrices], dtype=np.float32)
-        r, s = [], []
-        for m in matrices:
-            scale = np.linalg.norm(m[:3, :3], axis=0)
-            r.append(matrix_to_quat(m[:3, :3] / scale))
-            s.append(scale)
+        m = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
+        t = m[:, :3, 3].astype(np.float32)
+        scale = np.linalg.norm(m[:, :3, :3], axis=1)  # (k, 3): the length of each column
+        r = matrices_to_quats(m[:, :3, :3] / scale[:, None, :])
         out = {}
-        for name, arr, typ in (("TRANSLATION", t, "VEC3"), ("ROTATION", np.array(r, np.float32), "VEC4"),
-                               ("SCALE", np.array(s, np.float32), "VEC3")):
+        for name, arr, typ in (("TRANSLATION", t, "VEC3"), ("ROTATION", r.astype(np.float32), "VEC4"),
+                               ("SCALE", scale.astype(np.float32), "VEC3")):
             view = {"buffer": 0, "byteOffset": self._append(arr.tobytes()), "byteLength": arr.nbytes}
             self.doc["bufferViews"].append(view)
             acc = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": 5126,

@@ -146,9 +146,11 @@ def terrain_asset(site: Site, platforms: list[ir.Platform], georef, name: str) -
                     description=f"terraced terrain of {site.name}")
 
 
-def height_at(asset: ir.Asset, en: np.ndarray) -> np.ndarray:
+def height_at(asset: ir.Asset, en: np.ndarray, chunk: int = 256) -> np.ndarray:
     """Terrain height (ENU z) under each point en: (n, 2), the highest surface hit;
-    NaN where no surface lies under a point."""
+    NaN where no surface lies under a point. Points are tested against every triangle
+    at once, `chunk` points at a time (a (chunk, t) barycentric table)."""
+    en = np.asarray(en, dtype=np.float64).reshape(-1, 2)
     out = np.full(len(en), np.nan)
     for _, v in asset.visuals():
         m = v.mesh
@@ -156,12 +158,15 @@ def height_at(asset: ir.Asset, en: np.ndarray) -> np.ndarray:
         a, b, c = tri[:, 0, :2], tri[:, 1, :2], tri[:, 2, :2]
         det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
         ok = np.abs(det) > 1e-12
-        for i, p in enumerate(en):
-            l1 = ((p[0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (p[1] - a[:, 1])) / np.where(ok, det, 1)
-            l2 = ((b[:, 0] - a[:, 0]) * (p[1] - a[:, 1]) - (p[0] - a[:, 0]) * (b[:, 1] - a[:, 1])) / np.where(ok, det, 1)
+        safe = np.where(ok, det, 1.0)
+        for start in range(0, len(en), chunk):
+            px, py = en[start:start + chunk, 0:1], en[start:start + chunk, 1:2]  # (p, 1) against (t,)
+            l1 = ((px - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (py - a[:, 1])) / safe
+            l2 = ((b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (px - a[:, 0]) * (b[:, 1] - a[:, 1])) / safe
             l0 = 1 - l1 - l2
             inside = ok & (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
-            if inside.any():
-                z = (l0 * tri[:, 0, 2] + l1 * tri[:, 1, 2] + l2 * tri[:, 2, 2])[inside]
-                out[i] = np.nanmax([out[i], z.max()])
+            z = np.where(inside, l0 * tri[:, 0, 2] + l1 * tri[:, 1, 2] + l2 * tri[:, 2, 2], -np.inf).max(axis=1)
+            block = out[start:start + chunk]
+            hit = np.isfinite(z)
+            block[hit] = np.fmax(block[hit], z[hit])
     return out
