@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -66,14 +67,26 @@ def test_noop_edit_and_parameter_change(mini):
 
     nudge_stl(sources / "assets" / "kiosk" / "kiosk.stl")
     edit = explain(sources, out)
-    assert ran(edit) == {"asset:kiosk", "scene"}
-    assert edit["asset:kiosk"]["changed"] == [f"input {os.path.relpath(sources / 'assets/kiosk/kiosk.stl', out)}"]
+    assert ran(edit) == {"geometry:kiosk", "asset:kiosk", "scene"}
+    stl = f"input {os.path.relpath(sources / 'assets/kiosk/kiosk.stl', out)}"
+    assert edit["geometry:kiosk"]["changed"] == [stl]
+    assert edit["asset:kiosk"]["changed"] == [stl, "dependency geometry:kiosk"]
     assert edit["scene"]["changed"] == ["dependency asset:kiosk"]
 
+    # a parameter edit in asset.toml reruns exactly what uses it
     toml = sources / "assets" / "pole" / "asset.toml"
     toml.write_text(toml.read_text().replace("[0.004, 0.02]", "[0.004, 0.03]"))
     param = explain(sources, out)
-    assert ran(param) == {"asset:pole", "scene"}
+    assert ran(param) == {"geometry:pole", "asset:pole", "scene"}
+    assert param["geometry:pole"]["changed"] == ["parameters"]
+
+    toml.write_text("mass_kg = 175.0\n" + toml.read_text())
+    metadata = explain(sources, out)
+    assert ran(metadata) == {"asset:pole", "scene"}
+    assert metadata["geometry:pole"]["reason"] == "up to date"
+    sdf = (out / "models" / "pole" / "model.sdf").read_text()
+    masses = [float(m) for m in re.findall(r"<mass>([^<]+)</mass>", sdf)]
+    assert masses and sum(masses) == pytest.approx(175.0)
 
 
 def test_two_clean_builds_are_byte_identical(mini, tmp_path):
@@ -118,7 +131,7 @@ def test_sample_one_asset_edit_reexports_only_its_chain(tmp_path):
     explain(sources, out, "--cache", cache)
     nudge_stl(sources / "assets" / "junction_box" / "junction_box.stl")
     edit = explain(sources, out, "--cache", cache)
-    assert ran(edit) == {"asset:junction_box", "scene"}
+    assert ran(edit) == {"geometry:junction_box", "asset:junction_box", "scene"}
 
 
 def test_floorplan_memo_skips_the_dxf_until_it_changes(tmp_path, monkeypatch):

@@ -59,7 +59,7 @@ def _our_lod_seconds(built: Path, asset: str) -> float | None:
     """Time of our LOD step in the asset's last build (the task result's timings)."""
     try:
         state = json.loads((built / ".state.json").read_text())
-        timings = state["tasks"][f"asset:{asset}"]["result"]["timings"]
+        timings = state["tasks"][f"geometry:{asset}"]["result"]["timings"]
     except (OSError, KeyError, json.JSONDecodeError):
         return None
     return float(timings["lod"]) if "lod" in timings else None

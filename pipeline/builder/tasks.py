@@ -1,12 +1,23 @@
-"""The build's tasks: one package per used asset, the terrain, the scene.
+"""The build's tasks: per used asset a geometry task and a package task, the terrain,
+the scene.
 
 `plan()` reads the sources and returns the task graph; the actions below run in
 worker processes and write into the staging folder they are given (paths relative
-to build/). Each asset task is the asset's whole chain: read -> steps -> writers.
+to build/). An asset's chain is two tasks:
+
+- `geometry:<id>`: read the source, clean, collision, LOD chain -> .ir/<id>/<id>.ir
+  (irfile). The slow part (Blender, the LOD search). Its parameters are the keys of
+  asset.toml that shape geometry; the metadata keys below are not among them.
+- `asset:<id>`: the .ir file and asset.toml's metadata -> the package in every format,
+  the manifest and the findings.
+
+So editing an asset's description, category, mass or triangle budget rewrites its
+package and leaves its geometry alone; editing its source or an LOD budget reruns both.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,11 +27,16 @@ from ..errors import UserError
 from ..export import names
 from .graph import Task, code_version, sha256_file
 
-ASSET_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
-              "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.export", "pipeline.validate.checks",
-              "pipeline.builder.tasks")
+GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
+                 "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.validate.checks",
+                 "pipeline.builder.irfile", "pipeline.builder.tasks")
+PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.validate.checks",
+                "pipeline.builder.irfile", "pipeline.builder.tasks")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
               "pipeline.scene", "pipeline.export", "pipeline.geometry.transform", "pipeline.builder.tasks")
+# asset.toml keys only the package task reads (the readers get neutral values for them)
+METADATA_KEYS = ("description", "category", "mass_kg", "triangle_budget")
+IR_FOLDER = ".ir"
 
 
 # --- the asset chain ----------------------------------------------------------
@@ -80,25 +96,68 @@ def _inside(root: Path, name: str) -> Path:
     return path
 
 
-def build_asset(staging: Path, asset_toml: str) -> dict:
-    """Task action: one asset's package."""
-    from ..export import manifest
+def ir_path(asset_id: str) -> str:
+    """Where an asset's geometry task leaves its result, relative to build/."""
+    return f"{IR_FOLDER}/{asset_id}/{asset_id}.ir"
+
+
+def geometry_params(cfg: config.AssetConfig) -> dict:
+    """The asset.toml keys that shape the geometry task's result."""
+    return {k: v for k, v in sorted(cfg.params.items()) if k not in METADATA_KEYS}
+
+
+def _geometry_config(cfg: config.AssetConfig) -> config.AssetConfig:
+    """cfg with neutral metadata, so the geometry task depends on its parameters alone
+    (a mass of 1 kg: the package task scales the links' shares to asset.toml's mass)."""
+    return dataclasses.replace(cfg, description="", category="", mass_kg=1.0, triangle_budget=0)
+
+
+def build_geometry(staging: Path, asset_toml: str) -> dict:
+    """Task action: one asset's source read and processed, written as an .ir file."""
     from ..validate.checks import as_dicts, check_asset
+    from . import irfile
 
     timings = {}
     t = time.perf_counter()
-    cfg = config.load_asset_config(Path(asset_toml))
+    cfg = _geometry_config(config.load_asset_config(Path(asset_toml)))
     asset = read_source(cfg)
-    asset = asset.with_(description=asset.description or cfg.description, category=cfg.category)
     timings["read"] = time.perf_counter() - t
-    # the modeller's file as authored, then what the steps made of it
-    source_findings = check_asset(asset, cfg.triangle_budget)
+    # the modeller's file as authored (the triangle budget is the package task's)
+    source_findings = check_asset(asset)
+    source_triangles = asset.triangle_count(0)
     for name, step in asset_steps(cfg):
         t = time.perf_counter()
         asset = step(asset)
         timings[name] = time.perf_counter() - t
-    built_findings = check_asset(asset, cfg.triangle_budget)
+    out = Path(staging) / ir_path(cfg.id)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    irfile.write(out, asset, {"source_findings": as_dicts(source_findings), "source_triangles": source_triangles})
+    return {"asset": cfg.id, "timings": timings}
+
+
+def with_metadata(asset: ir.Asset, cfg: config.AssetConfig) -> ir.Asset:
+    """asset.toml's description, category and mass on an asset the geometry task made:
+    the links keep their shares of the mass."""
+    total = sum(link.mass for link in asset.links)
+    links = asset.links
+    if total > 0:
+        links = tuple(dataclasses.replace(link, mass=cfg.mass_kg * link.mass / total) for link in links)
+    return asset.with_(description=cfg.description, category=cfg.category, links=links)
+
+
+def build_asset(staging: Path, asset_toml: str, build: str) -> dict:
+    """Task action: one asset's package from its geometry task's result."""
+    from ..export import manifest
+    from ..validate.checks import Finding, as_dicts, budget_findings, check_asset
+    from . import irfile
+
     t = time.perf_counter()
+    cfg = config.load_asset_config(Path(asset_toml))
+    asset, extra = irfile.read(Path(build) / ir_path(cfg.id))
+    asset = with_metadata(asset, cfg)
+    source_findings = [Finding.from_dict(d) for d in extra["source_findings"]]
+    source_findings += budget_findings(asset.id, extra["source_triangles"], cfg.triangle_budget)
+    built_findings = check_asset(asset, cfg.triangle_budget)
     models = Path(staging) / "models"
     models.mkdir(parents=True, exist_ok=True)
     outputs, lod_models = write_package(asset, models)
@@ -106,9 +165,8 @@ def build_asset(staging: Path, asset_toml: str) -> dict:
     data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
     data["findings"] = {"source": as_dicts(source_findings), "built": as_dicts(built_findings)}
     manifest.write(data, models / asset.id)
-    timings["write"] = time.perf_counter() - t
     return {"asset": asset.id, "triangles": [lod["triangles"] for lod in data["lods"]],
-            "errors_m": [lod["error_m"] for lod in data["lods"]], "timings": timings}
+            "errors_m": [lod["error_m"] for lod in data["lods"]], "timings": {"write": time.perf_counter() - t}}
 
 
 # --- planning -----------------------------------------------------------------
@@ -163,19 +221,31 @@ def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
             if a not in p.assets:
                 raise UserError(Path(sources) / "assets", a, "no such asset")
         wanted = sorted(only)
-    asset_code = code_version(*ASSET_CODE)
+    geometry_code, package_code = code_version(*GEOMETRY_CODE), code_version(*PACKAGE_CODE)
     for asset_id in wanted:
         cfg = p.assets[asset_id]
+        source, toml = cfg.source.resolve(), cfg.path.resolve()
+        p.tasks.append(Task(
+            name=f"geometry:{asset_id}",
+            stage="geometry",
+            action=build_geometry,
+            args={"asset_toml": str(toml)},
+            inputs=(source,),
+            params={"asset": asset_id, "asset.toml": geometry_params(cfg)},
+            code=geometry_code,
+            outputs=(f"{IR_FOLDER}/{asset_id}/",),
+            needs_blender=source.suffix.lower() == ".blend",
+        ))
         p.tasks.append(Task(
             name=f"asset:{asset_id}",
             stage="assets",
             action=build_asset,
-            args={"asset_toml": str(cfg.path.resolve())},
-            inputs=(cfg.path.resolve(), cfg.source.resolve()),
+            args={"asset_toml": str(toml), "build": str(Path(build).resolve())},
+            inputs=(toml, source),
+            deps=(f"geometry:{asset_id}",),
             params={"asset": asset_id},
-            code=asset_code,
+            code=package_code,
             outputs=(f"models/{asset_id}/", f"models/{asset_id}__lod*"),
-            needs_blender=cfg.source.suffix.lower() == ".blend",
         ))
     if not only:
         p.tasks.extend(scene_tasks(p, Path(sources), Path(build)))

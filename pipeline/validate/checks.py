@@ -235,6 +235,13 @@ def _asset_bounds(asset: ir.Asset) -> np.ndarray | None:
     return np.stack([allp.min(axis=0), allp.max(axis=0)])
 
 
+def budget_findings(asset_id: str, triangles: int, budget_triangles: int | None) -> list[Finding]:
+    """GEOM008 when an asset's LOD0 has more triangles than its asset.toml allows."""
+    if budget_triangles is None or triangles <= budget_triangles:
+        return []
+    return [finding("GEOM008", asset_id, f"{triangles} triangles at LOD0, budget {budget_triangles}")]
+
+
 def geometry_findings(asset: ir.Asset, budget_triangles: int | None = None) -> list[Finding]:
     out: list[Finding] = []
     for link in asset.links:
@@ -256,9 +263,7 @@ def geometry_findings(asset: ir.Asset, budget_triangles: int | None = None) -> l
         if not _finite(joint.pose):
             out.append(finding("GEOM001", f"{asset.id}/{joint.name}", "joint pose is not finite"))
 
-    if budget_triangles is not None and asset.triangle_count(0) > budget_triangles:
-        out.append(finding("GEOM008", asset.id,
-                           f"{asset.triangle_count(0)} triangles at LOD0, budget {budget_triangles}"))
+    out += budget_findings(asset.id, asset.triangle_count(0), budget_triangles)
     for lod in asset.lods:
         if lod.level > 0 and not (lod.error_m <= lod.budget_m + LOD_ERROR_SLACK):
             out.append(finding("GEOM009", f"{asset.id}/lod{lod.level}",

@@ -1,0 +1,95 @@
+"""The geometry task's .ir file: exact round trip, same bytes every time, data only."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline import config, ir
+from pipeline.builder import irfile
+from pipeline.builder.tasks import asset_steps, read_source
+from pipeline.errors import UserError
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _same(a, b, where="asset") -> None:
+    """Field-by-field equality of two ir trees, arrays bit for bit."""
+    assert type(a) is type(b), where
+    if dataclasses.is_dataclass(a):
+        for f in dataclasses.fields(a):
+            _same(getattr(a, f.name), getattr(b, f.name), f"{where}.{f.name}")
+    elif isinstance(a, np.ndarray):
+        assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), where
+    elif isinstance(a, tuple):
+        assert len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{where}[{i}]")
+    else:
+        assert a == b, where
+
+
+@pytest.fixture(scope="module")
+def shunt_reactor() -> ir.Asset:
+    """A sample asset with shape keys (oil columns), bindings and materials, as read."""
+    cfg = config.load_asset_config(ROOT / "sources/assets/shunt_reactor/asset.toml")
+    return read_source(cfg)
+
+
+def test_sample_asset_round_trips_exactly(shunt_reactor):
+    asset = shunt_reactor
+    assert asset.bindings and any(m.shape_keys for _, v in asset.visuals() for m in v.lods)
+    data = irfile.dumps(asset, {"note": [1, 2.5]})
+    back, extra = irfile.loads(data)
+    _same(asset, back)
+    assert extra == {"note": [1, 2.5]}
+    assert irfile.dumps(back, {"note": [1, 2.5]}) == data
+
+
+def test_articulated_processed_asset_round_trips(tmp_path):
+    cfg = config.load_asset_config(ROOT / "sources/assets/disconnect_switch_vb/asset.toml")
+    asset = read_source(cfg)
+    for name, step in asset_steps(cfg)[:2]:  # clean, collision: hulls beside the visuals
+        asset = step(asset)
+    assert asset.joints and any(link.collisions for link in asset.links)
+    path = tmp_path / "a.ir"
+    irfile.write(path, asset)
+    back, _ = irfile.read(path)
+    _same(asset, back)
+
+
+def _header(data: bytes) -> tuple[dict, bytes]:
+    (n,) = struct.unpack_from("<Q", data, len(irfile.MAGIC))
+    start = len(irfile.MAGIC) + 8
+    return json.loads(data[start:start + n]), data[start + n:]
+
+
+def _with_header(header: dict, body: bytes) -> bytes:
+    text = json.dumps(header).encode()
+    text += b" " * (-(len(irfile.MAGIC) + 8 + len(text)) % 8)
+    return irfile.MAGIC + struct.pack("<Q", len(text)) + text + body
+
+
+@pytest.mark.parametrize("tamper", ["object dtype", "unknown class", "truncated", "not an ir file"])
+def test_a_tampered_file_is_refused_without_running_anything(shunt_reactor, tmp_path, tamper):
+    data = irfile.dumps(shunt_reactor)
+    header, body = _header(data)
+    if tamper == "object dtype":
+        header["arrays"][0]["dtype"] = "|O"
+        data = _with_header(header, body)
+    elif tamper == "unknown class":
+        header["asset"]["$"] = "Popen"
+        data = _with_header(header, body)
+    elif tamper == "truncated":
+        data = data[: len(data) // 2]
+    else:
+        data = b"\x80\x04pickle" + data
+    path = tmp_path / "bad.ir"
+    path.write_bytes(data)
+    with pytest.raises(UserError, match="bad.ir"):
+        irfile.read(path)
