@@ -14,7 +14,7 @@ import pytest
 
 import mini_sources
 from pipeline.bench import plans, report, sections, stats, summary
-from pipeline.bench.builds import edit_description
+from pipeline.bench.builds import edit_description, nudge_lod_budget
 
 SCHEMA = Path(__file__).resolve().parents[1] / "schemas" / "bench.schema.json"
 
@@ -52,6 +52,16 @@ def test_edit_description_changes_only_description(tmp_path):
     import tomllib
 
     assert tomllib.loads(bare.read_text())["description"] == "added"
+
+
+def test_nudge_lod_budget_scales_only_the_coarsest_budget(tmp_path):
+    import tomllib
+
+    toml = tmp_path / "asset.toml"
+    toml.write_text('category = "kiosk"\nsource = "k.stl"\n[lod]\nbudgets_m = [0.004, 0.02]\n[collision]\nmode = "hull"\n')
+    nudge_lod_budget(toml, 1.5)
+    data = tomllib.loads(toml.read_text())
+    assert data["lod"]["budgets_m"] == [0.004, 0.02 * 1.5] and data["collision"] == {"mode": "hull"}
 
 
 def test_repeated_and_unique_plans(tmp_path):
