@@ -69,11 +69,15 @@ def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cac
     from .builder.run import build as run_build
 
     report = run_build(sources, out, jobs=jobs, only=list(only), cache=cache, quiet=as_json)
+    # how long each task that ran took in its worker (the build files carry no timings)
+    tasks = [{**e, "seconds": round(report.timings[e["task"]], 4)} if e["task"] in report.timings else e
+             for e in report.explanations]
     if as_json:
-        click.echo(json.dumps({"tasks": report.explanations, "failed": report.failed}, indent=1, sort_keys=True))
+        click.echo(json.dumps({"tasks": tasks, "failed": report.failed}, indent=1, sort_keys=True))
     elif explain:
-        for e in report.explanations:
-            click.echo(f"{'RAN ' if e['ran'] else 'skip'} {e['task']}: {e['reason']}")
+        for e in tasks:
+            took = f" ({e['seconds']:.2f} s)" if "seconds" in e else ""
+            click.echo(f"{'RAN ' if e['ran'] else 'skip'} {e['task']}: {e['reason']}{took}")
     if report.failed:
         for name, msg in report.failed:
             click.echo(f"error: {name}: {msg}", err=True)

@@ -109,3 +109,17 @@ def test_second_concurrent_build_waits(src, tmp_path):
     assert "waiting for another build" in e2
     assert (out / "joined.txt").read_text() == "ALPHA+BETA"
     assert o2.strip() == "ran"  # the second found the first's work complete
+
+
+@pytest.mark.parametrize("costly", ["a", "b"])
+def test_longest_task_starts_first(src, tmp_path, costly):
+    """A worker takes the costliest ready task, whatever the names' order."""
+    from pipeline.builder.scheduler import Scheduler
+
+    graph = toy_graph.tasks(src, tmp_path / "build")
+    for t in graph:
+        t.cost = 10.0 if t.name == f"upper:{costly}" else 1.0
+    report = Scheduler(tmp_path / "build", jobs=1).run(graph)
+    other = "b" if costly == "a" else "a"
+    assert [e["task"] for e in report.explanations] == [f"upper:{costly}", f"upper:{other}", "join"]
+    assert (tmp_path / "build" / "joined.txt").read_text() == "ALPHA+BETA"

@@ -81,6 +81,7 @@ class Task:
     params:  JSON-serialisable parameters; enter the key as sorted JSON.
     code:    code version of the steps the action runs.
     outputs: paths relative to the build folder, each produced by this task alone.
+    cost:    a scheduling hint only (longest first); it never changes what a task makes.
     action:  a picklable callable `action(**args)` run in a worker; it writes the
              outputs into the staging folder it is given and returns a JSON-able dict.
     """
@@ -95,6 +96,7 @@ class Task:
     code: str = ""
     outputs: tuple[str, ...] = ()
     needs_blender: bool = False
+    cost: float = 0.0  # expected work (any unit): longer tasks start first; not in the key
     key: str = ""
     input_hashes: dict[str, str] = field(default_factory=dict)
 

@@ -3,7 +3,8 @@
 - A task whose key matches the last build and whose outputs are in place is skipped;
   one whose key is in the cache is restored; the rest run in workers.
 - Workers are spawned once and serve many tasks; a worker that will read .blend
-  files imports bpy once at start (`warm_blender`).
+  files imports bpy once at start, and each gets its share of the cores for native
+  thread pools (`init_worker`).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
@@ -71,12 +72,22 @@ class BuildLock:
         os.close(self.fd)
 
 
-def warm_blender() -> None:
-    """Worker initializer: pay bpy's import once per worker, not once per task."""
-    try:
-        import bpy  # noqa: F401
-    except ImportError:
-        pass
+# thread pools of the native libraries a task uses (libigl's distance queries above all)
+THREAD_VARIABLES = ("IGL_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+def init_worker(threads: int, blender: bool) -> None:
+    """Worker initializer. Each worker's native thread pools get its share of the cores
+    (N workers each running as many threads as there are cores only trade places);
+    a variable the user set is kept. A worker that will read .blend files pays bpy's
+    import once, not once per task."""
+    for name in THREAD_VARIABLES:
+        os.environ.setdefault(name, str(threads))
+    if blender:
+        try:
+            import bpy  # noqa: F401
+        except ImportError:
+            pass
 
 
 def _run_in_worker(action, args: dict, staging: str) -> dict:
@@ -154,8 +165,12 @@ class Scheduler:
             pool = None
             try:
                 while pending or running:
-                    for name in [n for n, t in pending.items() if all(d in done for d in t.deps)]:
-                        task = pending.pop(name)
+                    # Longest first, and only as many in flight as there are workers, so a
+                    # long task that becomes ready is not queued behind short ones.
+                    ready = [t for t in pending.values() if all(d in done for d in t.deps)]
+                    for task in sorted(ready, key=lambda t: (-t.cost, t.name)):
+                        name = task.name
+                        pending.pop(name)
                         if any(d in {f for f, _ in report.failed} for d in task.deps):
                             report.failed.append((name, "skipped: a dependency failed"))
                             done.add(name)
@@ -175,11 +190,14 @@ class Scheduler:
                             self._finish(state, task, keys, meta, report)
                             done.add(name)
                             continue
+                        if len(running) >= self.jobs:
+                            pending[name] = task  # its turn comes when a worker is free
+                            continue
                         if pool is None:
                             ctx = multiprocessing.get_context("spawn")
-                            pool = ProcessPoolExecutor(
-                                max_workers=self.jobs, mp_context=ctx,
-                                initializer=warm_blender if needs_bpy else None)
+                            threads = max(1, (os.cpu_count() or 1) // self.jobs)
+                            pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=init_worker,
+                                                       initargs=(threads, needs_bpy))
                         staging = self.build / ".staging" / task.key
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)

@@ -235,6 +235,9 @@ def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
             code=geometry_code,
             outputs=(f"{IR_FOLDER}/{asset_id}/",),
             needs_blender=source.suffix.lower() == ".blend",
+            # the LOD search dominates and grows with the mesh: the modeller's budget
+            # is the one size known before reading the source
+            cost=float(cfg.triangle_budget),
         ))
         p.tasks.append(Task(
             name=f"asset:{asset_id}",
