@@ -123,3 +123,29 @@ def test_longest_task_starts_first(src, tmp_path, costly):
     other = "b" if costly == "a" else "a"
     assert [e["task"] for e in report.explanations] == [f"upper:{costly}", f"upper:{other}", "join"]
     assert (tmp_path / "build" / "joined.txt").read_text() == "ALPHA+BETA"
+
+
+def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypatch):
+    """Native thread pools: each worker gets cores / tasks that can start together."""
+    from pipeline.builder.graph import FileHasher, check_graph
+    from pipeline.builder.scheduler import Scheduler, init_worker
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    out = tmp_path / "build"
+    sched = Scheduler(out, jobs=2)
+
+    def share() -> int:
+        state = sched._load_state()
+        return sched._threads_per_worker(check_graph(toy_graph.tasks(src, out)), state, FileHasher(state.get("hashes")))
+
+    assert share() == 2  # cold: both upper tasks start at once
+    toy_graph.build(src, out)
+    (src / "a.txt").write_text("changed")
+    assert share() == 4  # one chain, upper:a then join: one task at a time
+
+    for name in ("IGL_NUM_THREADS", "OMP_NUM_THREADS"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")  # the user's setting is kept
+    init_worker(3, blender=False)
+    assert (os.environ["IGL_NUM_THREADS"], os.environ["OMP_NUM_THREADS"], os.environ["OPENBLAS_NUM_THREADS"]) == (
+        "3", "3", "1")

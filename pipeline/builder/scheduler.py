@@ -4,7 +4,7 @@
   one whose key is in the cache is restored; the rest run in workers.
 - Workers are spawned once and serve many tasks; a worker that will read .blend
   files imports bpy once at start, and each gets its share of the cores for native
-  thread pools (`init_worker`).
+  thread pools (`init_worker`, `_threads_per_worker`).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
@@ -148,6 +148,21 @@ class Scheduler:
                     folder.rmdir()
         return meta
 
+    def _threads_per_worker(self, order: list[Task], state: dict, hasher: FileHasher) -> int:
+        """Cores per worker for native thread pools, split among the tasks that can run
+        side by side at the start: an edit that reruns one asset's chain gives its task
+        every core, a cold build gives each worker its share."""
+        keys: dict[str, str] = {}
+        stale = set()
+        for t in order:  # keys need only inputs and dependency keys, not outputs
+            keys[t.name] = t.compute_key(hasher, keys, self.build)
+            previous = state["tasks"].get(t.name)
+            fresh = previous and previous.get("key") == keys[t.name] and self._outputs_in_place(previous)
+            if not fresh and not self.cache.has(keys[t.name]):
+                stale.add(t.name)
+        width = sum(1 for t in order if t.name in stale and not stale.intersection(t.deps))
+        return max(1, (os.cpu_count() or 1) // max(1, min(self.jobs, width)))
+
     # --- run --------------------------------------------------------------------
     def run(self, tasks: list[Task], stop_on_error: bool = True) -> BuildReport:
         order = check_graph(tasks)
@@ -195,7 +210,7 @@ class Scheduler:
                             continue
                         if pool is None:
                             ctx = multiprocessing.get_context("spawn")
-                            threads = max(1, (os.cpu_count() or 1) // self.jobs)
+                            threads = self._threads_per_worker(order, state, hasher)
                             pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=init_worker,
                                                        initargs=(threads, needs_bpy))
                         staging = self.build / ".staging" / task.key
