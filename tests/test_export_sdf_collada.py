@@ -258,3 +258,13 @@ def test_unknown_material_is_a_user_error(tmp_path):
     for writer in (collada_writer.write, sdf_writer.write):
         with pytest.raises(UserError, match="oil_level.*lamp_glass"):
             writer(broken, tmp_path / "x")
+
+
+def test_fmt_join_spells_every_float_as_fmt_does():
+    from pipeline.export.names import fmt, fmt_join
+
+    rng = np.random.default_rng(3)
+    values = [0.0, -0.0, 1.0, -10.0, 100.0, 1.05, 10.05, -0.05, 1e-05, 1e16, 1e22, -1e-300, 2.5e-07, float("inf")]
+    values += list(rng.normal(size=20_000) * 10.0 ** rng.integers(-8, 9, 20_000)) + [i / 4 for i in range(-40, 40)]
+    assert fmt_join(values) == " ".join(fmt(v) for v in values)
+    assert fmt_join([-0.0, 3.0, 0.5]) == "0 3 0.5"

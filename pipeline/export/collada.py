@@ -160,7 +160,7 @@ def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def _reformat_floats(root, arrays: dict[str, np.ndarray]) -> None:
     """Write every float through names.fmt: full precision and one spelling."""
     for el in root.iter("{*}float_array"):
-        el.text = " ".join(names.fmt(x) for x in arrays[el.get("id")].tolist())
+        el.text = names.fmt_join(arrays[el.get("id")].tolist())
     for tag in _FLOAT_TAGS:
         for el in root.iter("{*}" + tag):
             el.text = " ".join(names.fmt(float(t)) for t in (el.text or "").split())

@@ -56,6 +56,17 @@ def fmt(x: float) -> str:
     return r[:-2] if r.endswith(".0") else r
 
 
+_POINT_ZERO = re.compile(r"\.0(?= |$)")
+_MINUS_ZERO = re.compile(r"(?<![^ ])-0(?= |$)")
+
+
+def fmt_join(values) -> str:
+    """" ".join(fmt(x) for x in values), with repr and the edits done at C speed (a
+    mesh's arrays hold hundreds of thousands of floats)."""
+    text = " ".join(map(repr, map(float, values)))
+    return _MINUS_ZERO.sub("0", _POINT_ZERO.sub("", text))
+
+
 SCENE_ROOT = "/Site"
 
 
