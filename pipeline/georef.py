@@ -180,7 +180,10 @@ class Georeferencer:
         step = _HEADING_STEP_M * np.stack([np.cos(a), np.sin(a)], axis=1)
         h = np.full(len(p), self.origin_llh[2])
         d = self.to_enu(p + step, h) - self.to_enu(p - step, h)
-        return np.arctan2(d[:, 1], d[:, 0])
+        # libm's atan2 per point: numpy 1.26's arctan2 on strided columns rounds its
+        # first call in a process differently from later ones (SVML vs libm), so the
+        # same build gave different yaw bits depending on what a worker ran before
+        return np.array([math.atan2(y, x) for x, y in zip(d[:, 0].tolist(), d[:, 1].tolist())], dtype=np.float64)
 
     def naive_enu(self, xy, h) -> np.ndarray:
         """The reference method: (E - E_origin, N - N_origin, h - h_origin), (n, 3) float64.

@@ -217,3 +217,24 @@ def test_bench_reports_speed_and_naive_error(sample_site):
     assert r["naive_error_far_corner_m"] > r["naive_error_grid_median_m"] > 0
     assert r["naive_error_grid_max_m"] >= r["naive_error_far_corner_m"] - 1e-9
     assert 0.002 < r["naive_error_far_corner_m"] / r["far_corner_distance_m"] < 0.004  # ~2.7 mm per m
+
+
+def test_headings_do_not_depend_on_what_the_process_ran_before():
+    """Two clean builds must give the same yaw bits whichever worker runs the scene:
+    the first headings() call in a fresh process equals later ones bit for bit."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np, hashlib\n"
+        "from pathlib import Path\n"
+        "from pipeline.scene.assemble import _load\n"
+        "site, fp, g = _load(Path('sources'))\n"
+        "xy = np.array([[p.x, p.y] for p in fp.placements]); hd = np.array([p.heading_deg for p in fp.placements])\n"
+        "a = g.headings(xy, hd); b = g.headings(xy, hd)\n"
+        "print(int((a != b).sum()), hashlib.sha256(a.tobytes()).hexdigest())\n"
+    )
+    root = Path(__file__).resolve().parent.parent
+    outs = [subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True).stdout
+            for _ in range(2)]
+    assert outs[0] == outs[1] and outs[0].split()[0] == "0", outs
