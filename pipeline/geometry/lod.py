@@ -243,6 +243,11 @@ class _Judge:
         self.queries, self.query_vertex, self.query_face = query_points_on(vertices, faces, samples)
         self.face_keys = _face_keys(faces, len(vertices))
         self._vertex_tree = None
+        # Per original query point, the last exact distance measured and the face it
+        # was measured to (key, -1: none). A later candidate that still has that face is
+        # at most that far from the point: a bound that spares most re-measurements.
+        self.bound_key = np.full(len(self.queries), -1, dtype=np.int64)
+        self.bound = np.full(len(self.queries), np.inf)
 
     def near_vertices(self, points: np.ndarray, k: int = 4) -> np.ndarray:
         """Original vertex ids nearest to `points: (p, 3)` (k each), unique."""
@@ -281,26 +286,43 @@ class _Judge:
         used, f = _clean.compact(f, len(v))
         v = v[used]
         kept = None if kept is None else kept[used]
-        queries = self.queries
         own, own_vertex, own_face = query_points_on(v, f, self.samples)
         if cand_keys is not None and self.face_keys is not None:
             # A point on a face both meshes share, or on an original vertex, is at
             # distance 0 from both surfaces: measuring it cannot change the maximum.
             shared = np.isin(self.face_keys, cand_keys)
             skip = np.isin(self.query_vertex, kept) | ((self.query_face >= 0) & shared[self.query_face])
-            queries = queries[~skip]
             own = own[(own_vertex < 0) & ~((own_face >= 0) & np.isin(cand_keys, self.face_keys)[own_face])]
         elif kept is not None:
-            queries = queries[~np.isin(self.query_vertex, kept)]
+            skip = np.isin(self.query_vertex, kept)
+        else:
+            skip = np.zeros(len(self.queries), dtype=bool)
+        index = np.nonzero(~skip)[0]
         target = SurfaceDistance(v, f, self.reference.origin)
-        d_there, d_back = target(queries), self.reference(own)
-        there = float(d_there.max(initial=0.0))
+        d_back = self.reference(own)
         back = float(d_back.max(initial=0.0))
+        # Points whose bound (an earlier exact distance to a face this candidate still
+        # has) is under the threshold can neither miss nor be the maximum of a failing
+        # candidate; a passing one measures them too, so its recorded error is exact.
+        bounded = np.zeros(len(index), dtype=bool)
+        if cand_keys is not None and threshold is not None:
+            near = self.bound[index] <= threshold
+            near[near] = np.isin(self.bound_key[index[near]], cand_keys)
+            bounded = near
+        d_there = np.zeros(len(index))
+        d_there[~bounded] = self._distances(target, index[~bounded], cand_keys)
+        there = float(d_there.max(initial=0.0))
+        topo = _topology_faces(v, f)
+        added = _clean.non_manifold_edge_count(topo) - self.non_manifold
+        if bounded.any() and there <= threshold and back <= tolerance and flips == 0 and added <= 0:
+            d_there[bounded] = self._distances(target, index[bounded], cand_keys)
+            there = float(d_there.max(initial=0.0))
+        else:
+            d_there[bounded] = self.bound[index[bounded]]  # upper bounds, all <= threshold
+        queries = self.queries[index]
         if threshold is not None:
             bad += [queries[d_there > threshold], own[d_back > threshold]]
             how_far += [d_there[d_there > threshold], d_back[d_back > threshold]]
-        topo = _topology_faces(v, f)
-        added = _clean.non_manifold_edge_count(topo) - self.non_manifold
         if added > 0 and threshold is not None:
             edges, counts = _clean.edge_face_counts(topo)
             e = edges[counts > 2]
@@ -309,6 +331,14 @@ class _Judge:
         where = np.concatenate(bad) if bad else np.zeros((0, 3))
         self.how_far = np.concatenate(how_far) if how_far else np.zeros(0)
         return Simplified(v, f, kept, max(there, back), flips, added), where
+
+    def _distances(self, target: SurfaceDistance, index: np.ndarray, cand_keys: np.ndarray | None) -> np.ndarray:
+        """Exact distances from the original query points `index` to `target`, kept
+        with the face each was measured to (as bounds for later candidates)."""
+        d, face = target.nearest(self.queries[index])
+        if cand_keys is not None and len(index):
+            self.bound[index], self.bound_key[index] = d, cand_keys[face]
+        return d
 
 
 def _face_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray | None:
