@@ -70,9 +70,9 @@ def loads(data: bytes) -> tuple[ir.Asset, dict]:
     body = memoryview(data)[start + n:]
     arrays = []
     for spec in header["arrays"]:
-        dtype = np.dtype(spec["dtype"]) if spec["dtype"] in _DTYPES else None
-        if dtype is None:
+        if spec["dtype"] not in _DTYPES:
             raise ValueError(f"dtype {spec['dtype']!r} not allowed")
+        dtype = np.dtype(spec["dtype"])
         shape = tuple(int(s) for s in spec["shape"])
         count = int(np.prod(shape, dtype=np.int64))
         arrays.append(np.frombuffer(body, dtype=dtype, count=count, offset=int(spec["offset"])).reshape(shape))
