@@ -86,3 +86,13 @@ def test_cull_keeps_what_is_seen_and_shadowing():
     assert [i["tag"] for i in r.cull(items, pose, k, 0.1, 100.0, None)] == ["seen"]
     sun = np.array([0.0, 0.0, 1.0])
     assert {i["tag"] for i in r.cull(items, pose, k, 0.1, 100.0, sun)} == {"seen", "shadower"}
+
+
+def test_frame_error_is_the_rms_level_difference_after_the_references_exposure():
+    ref = np.full((24, 32, 3), 0.05, np.float32)
+    cam = r.PhoneCamera()
+    assert r.frame_error(ref, ref, cam) == 0.0
+    gain = r.metered_gain(ref, cam)  # 0.40 / 0.05: the reference develops to 0.40 linear
+    levels = lambda x: np.round(r.srgb_encode(np.float64(gain * x)) * 255.0)  # noqa: E731
+    expected = abs(levels(0.05) - levels(0.025))
+    assert r.frame_error(ref * 0.5, ref, cam) == pytest.approx(expected) and expected > 30

@@ -83,6 +83,7 @@ def test_oil_leak_scenario_runs_on_the_sample(sample):
 # --- render-in-the-loop on the built sample ---------------------------------------
 
 TINY = r.PhoneCamera(width=64, height=48, samples=4)
+SMALL = r.PhoneCamera(width=128, height=96, samples=4)  # the pointer is over a pixel wide here
 
 
 def test_frames_labels_and_determinism(sample, tmp_path):
@@ -106,12 +107,43 @@ def test_frames_labels_and_determinism(sample, tmp_path):
     assert float((dark["rgb"].mean(axis=2) > 240).mean()) == 0.0
 
 
+def test_denoised_frame_is_the_same_in_a_fresh_process(sample, tmp_path):
+    """OIDN on the CPU: a frame rendered in another process has the same pixels."""
+    import subprocess
+    import sys
+
+    site = r.load_site(sample)
+    noon = dict(r.study_shots(site))["solar_noon"]
+    assert TINY.render_denoise
+    here = r.render_shots(site, [noon], tmp_path / "here", cam=TINY, seed=3)[0]["sha256"]
+    script = ("import sys; from pathlib import Path; from pipeline.runtime import render as r; "
+              "site = r.load_site(Path(sys.argv[1])); shot = dict(r.study_shots(site))['solar_noon']; "
+              "cam = r.PhoneCamera(width=64, height=48, samples=4); "
+              "print('SHA', r.render_shots(site, [shot], Path(sys.argv[2]), cam=cam, seed=3)[0]['sha256'])")
+    proc = subprocess.run([sys.executable, "-c", script, str(sample), str(tmp_path / "there")],
+                          capture_output=True, text=True, timeout=600)
+    there = next(x.split()[1] for x in proc.stdout.splitlines() if x.startswith("SHA "))
+    assert here == there
+
+
+def test_a_frame_does_not_depend_on_the_frames_before_it(sample, tmp_path):
+    """Night (lamps on, sun off), then noon: the noon frame equals noon rendered alone."""
+    site = r.load_site(sample)
+    shots = dict(r.study_shots(site))
+    alone = r.render_shots(site, [shots["solar_noon"]], tmp_path / "a", cam=SMALL, seed=5, gain=1.0)
+    after = r.render_shots(site, [shots["midnight"], shots["solar_noon"], shots["midnight"]], tmp_path / "b",
+                           cam=SMALL, seed=5, gain=1.0)
+    assert after[1]["sha256"] == alone[0]["sha256"]
+    first = r.render_shots(site, [shots["midnight"]], tmp_path / "c", cam=SMALL, seed=5, gain=1.0)
+    assert after[2]["sha256"] == after[0]["sha256"] == first[0]["sha256"]
+
+
 def test_study_table(sample, tmp_path):
     import shutil
 
     shutil.copytree(sample / "scene", tmp_path / "scene")
     (tmp_path / "models").symlink_to((sample / "models").resolve())
-    r.render_study(tmp_path, cam=TINY)
+    r.render_study(tmp_path, cam=r.PhoneCamera())  # the study's own frame: H needs its pixels
     report = json.loads((tmp_path / "reports" / "study.json").read_text())
     names = [c["condition"] for c in report["conditions"]]
     # A day's order from the first light in which the pointer is visible (H_ref).
@@ -125,6 +157,8 @@ def test_study_table(sample, tmp_path):
     assert by["midnight"]["S"] == 0.0 and by["late_night"]["S"] == 0.0
     assert by["late_afternoon"]["veil"] > 0.0 and by["late_afternoon"]["S"] > 0.5  # glare
     assert by["solar_noon"]["S"] < 0.2
+    for night in ("midnight", "late_night"):  # lamps light the dial: H follows the true level
+        assert by[night]["H"] == pytest.approx(by[night]["H_true"], abs=0.2)
     assert "late_afternoon" in (tmp_path / "reports" / "study.html").read_text()
 
 

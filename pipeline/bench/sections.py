@@ -191,26 +191,31 @@ def runtime_section(ctx: Context) -> dict:
 
 RENDER_SCRIPT = ("import json, sys; from pathlib import Path; from pipeline.runtime.render import bench_render; "
                  "r = bench_render(Path(sys.argv[1]), int(sys.argv[2]), sources=Path(sys.argv[3]), "
-                 "cycles_defaults=sys.argv[4] == '1'); print('BENCH_JSON ' + json.dumps(r))")
+                 "setup=sys.argv[4], reference=Path(sys.argv[5])); print('BENCH_JSON ' + json.dumps(r))")
 
 
 def render_section(ctx: Context) -> dict:
-    """The study's gauge close-up (320x240, 16 spp) with our Cycles settings and with
-    Blender's factory light paths, each in a fresh process, side by side."""
+    """The study's gauge close-up (320x240) with our Cycles settings and with Blender's
+    factory light paths at 16 raw samples, each in a fresh process, side by side; both
+    measured against a 256-sample factory-light-path reference rendered first."""
     import json
     import subprocess
     import sys
+    import tempfile
 
     built = ctx.built or ctx.out  # the build section's sample, else the user's build
     if not (built / "scene" / "placements.json").is_file() or not (built / "models" / "shunt_reactor").is_dir():
         return {"skipped": "no built shunt reactor (the study's target) in these sources"}
     out = {}
-    for label, defaults in (("ours", "0"), ("blender_defaults", "1")):
-        proc = subprocess.run([sys.executable, "-c", RENDER_SCRIPT, str(built), str(ctx.pick(2, 5)),
-                               str(ctx.sources), defaults], capture_output=True, text=True, timeout=1200)
-        line = next((x for x in reversed(proc.stdout.splitlines()) if x.startswith("BENCH_JSON ")), None)
-        if line is None:
-            raise RuntimeError(f"render bench ({label}) exited {proc.returncode}: {proc.stderr[-500:]}")
-        out[label] = json.loads(line[len("BENCH_JSON "):])
+    with tempfile.TemporaryDirectory(prefix="twin_bench_render_") as tmp:
+        reference = Path(tmp) / "reference.npy"
+        for setup in ("reference", "ours", "blender_defaults"):
+            proc = subprocess.run([sys.executable, "-c", RENDER_SCRIPT, str(built), str(ctx.pick(2, 5)),
+                                   str(ctx.sources), setup, str(reference)], capture_output=True, text=True,
+                                  timeout=1200)
+            line = next((x for x in reversed(proc.stdout.splitlines()) if x.startswith("BENCH_JSON ")), None)
+            if line is None:
+                raise RuntimeError(f"render bench ({setup}) exited {proc.returncode}: {proc.stderr[-500:]}")
+            out[setup] = json.loads(line[len("BENCH_JSON "):])
     return out
 

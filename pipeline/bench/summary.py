@@ -151,6 +151,11 @@ def _render_rows(d):
     if not d or "ours" not in d:
         return []
     ours, peer = d["ours"], d["blender_defaults"]
-    return [_row("render", "gauge close-up frame, Cycles CPU", ours["median_s"], peer["median_s"], "s",
-                 "Cycles at Blender's factory light paths", f"{ours['frame']}; target under 2 s")]
+    rows = [_row("render", "gauge close-up frame, Cycles CPU", ours["median_s"], peer["median_s"], "s",
+                 "Cycles at Blender's factory light paths, 16 raw samples", f"{ours['frame']}; target under 2 s")]
+    if "rmse_8bit" in ours and "rmse_8bit" in peer:
+        rows.append(_row("render", "frame error vs converged reference (RMS, 8-bit levels, before ISP)",
+                         ours["rmse_8bit"], peer["rmse_8bit"], "levels",
+                         "Cycles at Blender's factory light paths, 16 raw samples", ours["reference"]))
+    return rows
 
