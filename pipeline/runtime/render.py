@@ -712,60 +712,18 @@ def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, poin
     }
 
 
-def _metrics():
-    """The study's metrics from runtime/perception.py; the documented formulas
-    (PAPER_NOTES.md) here only while that module is missing."""
-    try:
-        from . import perception  # noqa: F401
-
-        return perception
-    except ImportError:
-        return _LocalMetrics
-
-
-class _LocalMetrics:
-    """Stand-in for runtime/perception.py (PAPER_NOTES.md, "Image metrics")."""
-
-    @staticmethod
-    def rms_contrast(gray: np.ndarray) -> float:
-        g = gray.astype(np.float64)
-        return float(np.sqrt(np.mean((g - g.mean()) ** 2)) / 255.0)
-
-    @staticmethod
-    def high_intensity_ratio(gray: np.ndarray, threshold: int = 240) -> float:
-        return float(np.mean(gray > threshold))
-
-    @staticmethod
-    def pointer_extent(bgr: np.ndarray) -> float:
-        """Row extent of the dark pointer pixels inside the dial region (red | white)."""
-        import cv2
-
-        hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
-        h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
-        red = ((h <= 10) | (h >= 160)) & (s >= 100) & (v >= 50)
-        white = (s <= 60) & (v >= 200)
-        region = (red | white).astype(np.uint8)
-        if region.sum() < 3:
-            return 0.0
-        # "Inside the region": within the convex hull of the dial's pixels.
-        hull = cv2.convexHull(cv2.findNonZero(region))
-        inside = np.zeros_like(region)
-        cv2.fillConvexPoly(inside, hull, 1)
-        rows = np.nonzero((v <= 80) & (inside > 0))[0]
-        return float(rows.max() - rows.min()) if rows.size else 0.0
-
-
 def measure(bgr_crop: np.ndarray, h_ref: float | None) -> dict:
-    """C, S and the pointer extent of a crop; H when a reference is known."""
+    """C, S and the pointer extent of a crop (runtime/perception.py); H when a reference
+    is known."""
     import cv2
 
-    m = _metrics()
-    gray = cv2.cvtColor(bgr_crop, cv2.COLOR_BGR2GRAY)
-    extent = m.pointer_extent(bgr_crop) if hasattr(m, "pointer_extent") else None
-    if extent is None:  # perception's API: oil_height_ratio(crop, h_ref) -> (H, extent)?
-        extent = _LocalMetrics.pointer_extent(bgr_crop)
+    from . import perception
+
+    gray = cv2.cvtColor(np.ascontiguousarray(bgr_crop), cv2.COLOR_BGR2GRAY)
+    h, w = gray.shape
+    extent = float(perception.pointer_height(bgr_crop, (0, 0, w, h)))
     ref = h_ref if h_ref else extent
-    return {"C": m.rms_contrast(gray), "S": m.high_intensity_ratio(gray), "extent_px": extent,
+    return {"C": perception.rms_contrast(gray), "S": perception.high_intensity_ratio(gray), "extent_px": extent,
             "H": (extent / ref) if ref else 0.0}
 
 
@@ -1109,7 +1067,7 @@ def render_study(out, *, cam: PhoneCamera | None = None, sources: Path | None = 
                      "roi": [x0, y0, x1, y1], "C": m["C"], "S": m["S"], "H": m["H"], "H_true": h_true,
                      "render_s": lab["render_s"], "frame_s": lab["frame_s"]})
     report = {"target": STUDY_TARGET, "zoom": STUDY_ZOOM, "seed": seed, "h_ref_px": h_ref,
-              "metrics_from": _metrics().__name__, "camera": cam.__dict__, "conditions": rows}
+              "camera": cam.__dict__, "conditions": rows}
     (out / "reports").mkdir(parents=True, exist_ok=True)
     _write_json(out / "reports" / "study.json", report)
     (out / "reports" / "study.html").write_text(_study_html(report))
