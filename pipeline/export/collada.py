@@ -117,7 +117,9 @@ def _sources(ident: str, mesh: ir.Mesh):
     inputs = dae_source.InputList()
     for semantic, sid, data, comps in streams:
         arr = np.array(data, dtype=np.float64).reshape(-1)
-        sources.append(dae_source.FloatSource(sid, arr.copy(), comps))
+        # pycollada spells a source's floats when it is made and again on save; the
+        # text is ours (_reformat_floats), so it is handed zeros, which spell fast
+        sources.append(dae_source.FloatSource(sid, np.zeros_like(arr), comps))
         arrays[f"{sid}-array"] = arr
         inputs.addInput(0, semantic, f"#{sid}", set="0" if semantic == "TEXCOORD" else None)
     return arrays, inputs, sources
