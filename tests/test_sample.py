@@ -5,6 +5,7 @@ done."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -83,7 +84,7 @@ def test_oil_leak_scenario_runs_on_the_sample(sample):
 # --- render-in-the-loop on the built sample ---------------------------------------
 
 TINY = r.PhoneCamera(width=64, height=48, samples=4)
-SMALL = r.PhoneCamera(width=128, height=96, samples=4)  # the pointer is over a pixel wide here
+SMALL = r.PhoneCamera(width=128, height=96, samples=4)  # the history test's frame: it showed the bug
 
 
 def test_frames_labels_and_determinism(sample, tmp_path):
@@ -109,19 +110,16 @@ def test_frames_labels_and_determinism(sample, tmp_path):
 
 def test_denoised_frame_is_the_same_in_a_fresh_process(sample, tmp_path):
     """OIDN on the CPU: a frame rendered in another process has the same pixels."""
-    import subprocess
-    import sys
-
     site = r.load_site(sample)
     noon = dict(r.study_shots(site))["solar_noon"]
     assert TINY.render_denoise
     here = r.render_shots(site, [noon], tmp_path / "here", cam=TINY, seed=3)[0]["sha256"]
-    script = ("import sys; from pathlib import Path; from pipeline.runtime import render as r; "
+    script = ("import json, sys; from pathlib import Path; from pipeline.runtime import render as r; "
               "site = r.load_site(Path(sys.argv[1])); shot = dict(r.study_shots(site))['solar_noon']; "
-              "cam = r.PhoneCamera(width=64, height=48, samples=4); "
+              "cam = r.PhoneCamera(**json.loads(sys.argv[3])); "
               "print('SHA', r.render_shots(site, [shot], Path(sys.argv[2]), cam=cam, seed=3)[0]['sha256'])")
-    proc = subprocess.run([sys.executable, "-c", script, str(sample), str(tmp_path / "there")],
-                          capture_output=True, text=True, timeout=600)
+    proc = subprocess.run([sys.executable, "-c", script, str(sample), str(tmp_path / "there"),
+                           json.dumps(dataclasses.asdict(TINY))], capture_output=True, text=True, timeout=600)
     there = next(x.split()[1] for x in proc.stdout.splitlines() if x.startswith("SHA "))
     assert here == there
 

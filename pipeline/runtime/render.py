@@ -63,8 +63,8 @@ class PhoneCamera:
     OpenImageDenoise (albedo and normal guides, BALANCED quality, on the CPU) land
     closer to a converged render than 16 raw samples (8-bit RMS error 3.5 against 9.9 at
     noon, 7.6 against 25.7 at midnight, in 40 % of the time; bench_render measures it
-    against a 256-sample reference); 8 samples came 2-12 % closer at 1.5-2x the time and
-    left the study's C, S and H as they were. OIDN on the CPU gives the same pixels in
+    against a 256-sample reference); 8 samples came 2-12 % closer at 1.5-2x the time, and
+    moved the study's C by at most 0.006 and H by at most 0.016 (S not at all). OIDN on the CPU gives the same pixels in
     every run and process, so frames stay a function of scenario and seed.
     """
 
@@ -410,7 +410,7 @@ class _Blender:
         s.render.threads = self.THREADS
         s.render.resolution_x, s.render.resolution_y = cam.width, cam.height
         s.render.resolution_percentage = 100
-        # Cycles' persistent data would keep the BVH between frames (0.1-0.2 s a frame here),
+        # Cycles' persistent data would keep the BVH between frames (0.1-0.3 s a frame here),
         # but a night frame (lamps on, sun off) rendered after a day frame came out with other
         # pixels than the same frame rendered first: a frame must not depend on its history.
         s.render.use_persistent_data = False
@@ -712,19 +712,18 @@ def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, poin
     }
 
 
-def measure(bgr_crop: np.ndarray, h_ref: float | None) -> dict:
-    """C, S and the pointer extent of a crop (runtime/perception.py); H when a reference
-    is known."""
+def measure(bgr_crop: np.ndarray, bgr_face: np.ndarray) -> dict:
+    """The study's C and S of a gauge crop and the pointer extent (px) on its dial face
+    alone (runtime/perception.py): the crop's corners hold bezel and its shadows, which
+    the region's convex hull would otherwise take for pointer pixels."""
     import cv2
 
     from . import perception
 
     gray = cv2.cvtColor(np.ascontiguousarray(bgr_crop), cv2.COLOR_BGR2GRAY)
-    h, w = gray.shape
-    extent = float(perception.pointer_height(bgr_crop, (0, 0, w, h)))
-    ref = h_ref if h_ref else extent
-    return {"C": perception.rms_contrast(gray), "S": perception.high_intensity_ratio(gray), "extent_px": extent,
-            "H": (extent / ref) if ref else 0.0}
+    h, w = bgr_face.shape[:2]
+    return {"C": perception.rms_contrast(gray), "S": perception.high_intensity_ratio(gray),
+            "extent_px": float(perception.pointer_height(bgr_face, (0, 0, w, h)))}
 
 
 def _sha(data: bytes) -> str:
@@ -1048,10 +1047,7 @@ def render_study(out, *, cam: PhoneCamera | None = None, sources: Path | None = 
     for (name, shot), rec in zip(shots, records):
         x0, y0, x1, y1 = study_roi(rec)
         crop = rec["rgb"][y0:y1, x0:x1, ::-1]
-        m = measure(crop, h_ref)
-        # H on the dial face only: the box's corners hold bezel and its shadows, which the
-        # region's convex hull would otherwise take for pointer pixels.
-        m["extent_px"] = measure(face_only(crop, site, shot, cam, (x0, y0)), None)["extent_px"]
+        m = measure(crop, face_only(crop, site, shot, cam, (x0, y0)))
         m["H"] = m["extent_px"] / h_ref if h_ref else 0.0
         if h_ref is None:
             h_ref = m["extent_px"] or None
@@ -1102,10 +1098,8 @@ def _study_html(report: dict) -> str:
 # --- benchmark -----------------------------------------------------------------------------------
 
 
-# Blender's factory light-path settings, for the bench's side-by-side peer and reference.
-CYCLES_DEFAULTS = {"max_bounces": 12, "diffuse_bounces": 4, "glossy_bounces": 4, "transmission_bounces": 12,
-                   "volume_bounces": 0, "transparent_max_bounces": 8, "caustics_reflective": True,
-                   "caustics_refractive": True, "use_light_tree": True, "tile_size": 2048}
+# _Blender renders at Blender's factory light paths; the peer and the reference differ
+# from ours only in their samples and denoiser.
 PEER_CAMERA = PhoneCamera(samples=16, render_denoise="")  # what one would try first: raw samples
 REFERENCE_CAMERA = PhoneCamera(samples=256, render_denoise="")  # converged enough to stand for the truth
 
@@ -1127,19 +1121,16 @@ def bench_render(out="build", repeats: int = 5, threads: int | None = None, sour
     loaded once (load_s), then `repeats` frames re-render it (render_s: Cycles alone;
     frame_s: with the phone's develop).
 
-    setup: "ours" (PhoneCamera's samples, light paths and denoiser), "blender_defaults"
-    (the peer: Blender's factory light paths at 16 raw samples) or "reference" (factory
-    light paths at 256 samples, saved to `reference` as .npy, timed once). With a saved
-    `reference`, the frame's error against it is reported too (frame_error)."""
+    setup: "ours" (PhoneCamera's samples and denoiser), "blender_defaults" (the peer: 16
+    raw samples) or "reference" (256 raw samples, saved to `reference` as .npy, timed
+    once); all at Blender's factory light paths. With a saved `reference`, the frame's
+    error against it is reported too (frame_error)."""
     site = load_site(Path(out), sources)
     cam = {"ours": PhoneCamera(), "blender_defaults": PEER_CAMERA, "reference": REFERENCE_CAMERA}[setup]
     shot = dict(study_shots(site))["solar_noon"]
     bl = _Blender(site, cam, 1)
     if threads:
         bl.scene.render.threads = threads
-    if setup != "ours":
-        for key, value in CYCLES_DEFAULTS.items():
-            setattr(bl.scene.cycles, key, value)
     if setup == "reference":
         repeats = 1
     try:
