@@ -28,6 +28,7 @@ from pathlib import Path
 from ..errors import UserError
 from .cache import Cache
 from .graph import FileHasher, Task, check_graph, explain, record
+from .spare import SHARE_VARIABLE
 
 STATE_FILE = ".state.json"
 LOCK_FILE = ".lock"
@@ -83,6 +84,7 @@ def init_worker(threads: int, blender: bool) -> None:
     import once, not once per task."""
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, str(threads))
+    os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (spare.beside)
     if blender:
         try:
             import bpy  # noqa: F401

@@ -21,11 +21,13 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 from .. import config, ir
 from ..errors import UserError
 from ..export import names
 from .graph import Task, code_version, sha256_file
+from .spare import beside
 
 GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
                  "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.validate.checks",
@@ -68,24 +70,33 @@ def asset_steps(cfg: config.AssetConfig) -> list[tuple[str, object]]:
     ]
 
 
-def write_package(asset: ir.Asset, models: Path) -> tuple[dict[str, str], list[str]]:
-    """Every format of one asset into models/<id>/, LOD variants beside it.
-    Returns (package-relative path -> sha256, LOD variant model names)."""
+def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object] | None = None
+                  ) -> tuple[dict[str, str], list[str], object]:
+    """Every format of one asset into models/<id>/, LOD variants beside it; the COLLADA
+    meshes (the largest share) beside the rest when the worker has a core to spare,
+    and `alongside()` (if given) with the rest. Returns (package-relative path ->
+    sha256, LOD variant model names, what alongside returned)."""
     from ..export import PACKAGE_FORMATS, sdf, writer
 
     folder = _inside(models, asset.id)
     folder.mkdir(parents=True, exist_ok=True)
-    for fmt in PACKAGE_FORMATS:
-        writer(fmt)(asset, folder)
-    lod_models = []
-    for level in range(1, asset.lod_count):
-        name = names.lod_model_name(asset.id, level)
-        variant = _inside(models, name)
-        variant.mkdir(parents=True, exist_ok=True)
-        sdf.write(asset, variant, lod=level, model_name=name)
-        lod_models.append(name)
+
+    def the_rest():
+        for fmt in PACKAGE_FORMATS:
+            if fmt != "collada":
+                writer(fmt)(asset, folder)
+        lod_models = []
+        for level in range(1, asset.lod_count):
+            name = names.lod_model_name(asset.id, level)
+            variant = _inside(models, name)
+            variant.mkdir(parents=True, exist_ok=True)
+            sdf.write(asset, variant, lod=level, model_name=name)
+            lod_models.append(name)
+        return lod_models, alongside() if alongside is not None else None
+
+    (lod_models, extra), _ = beside(the_rest, lambda: writer("collada")(asset, folder))
     outputs = {str(p.relative_to(folder)): sha256_file(p) for p in sorted(folder.rglob("*")) if p.is_file()}
-    return outputs, lod_models
+    return outputs, lod_models, extra
 
 
 def _inside(root: Path, name: str) -> Path:
@@ -120,15 +131,20 @@ def build_geometry(staging: Path, asset_toml: str) -> dict:
     timings = {}
     t = time.perf_counter()
     cfg = _geometry_config(config.load_asset_config(Path(asset_toml)))
-    asset = read_source(cfg)
+    source = read_source(cfg)
     timings["read"] = time.perf_counter() - t
+
+    def process():
+        asset = source
+        for name, step in asset_steps(cfg):
+            t = time.perf_counter()
+            asset = step(asset)
+            timings[name] = time.perf_counter() - t
+        return asset
+
     # the modeller's file as authored (the triangle budget is the package task's)
-    source_findings = check_asset(asset)
-    source_triangles = asset.triangle_count(0)
-    for name, step in asset_steps(cfg):
-        t = time.perf_counter()
-        asset = step(asset)
-        timings[name] = time.perf_counter() - t
+    asset, source_findings = beside(process, lambda: check_asset(source))
+    source_triangles = source.triangle_count(0)
     out = Path(staging) / ir_path(cfg.id)
     out.parent.mkdir(parents=True, exist_ok=True)
     irfile.write(out, asset, {"source_findings": as_dicts(source_findings), "source_triangles": source_triangles})
@@ -157,10 +173,10 @@ def build_asset(staging: Path, asset_toml: str, build: str) -> dict:
     asset = with_metadata(asset, cfg)
     source_findings = [Finding.from_dict(d) for d in extra["source_findings"]]
     source_findings += budget_findings(asset.id, extra["source_triangles"], cfg.triangle_budget)
-    built_findings = check_asset(asset, cfg.triangle_budget)
     models = Path(staging) / "models"
     models.mkdir(parents=True, exist_ok=True)
-    outputs, lod_models = write_package(asset, models)
+    outputs, lod_models, built_findings = write_package(asset, models,
+                                                        alongside=lambda: check_asset(asset, cfg.triangle_budget))
     source = {"file": cfg.source.name, "sha256": sha256_file(cfg.source), "config_sha256": sha256_file(cfg.path)}
     data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
     data["findings"] = {"source": as_dicts(source_findings), "built": as_dicts(built_findings)}

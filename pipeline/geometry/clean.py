@@ -152,9 +152,16 @@ def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def non_manifold_edge_count(faces: np.ndarray) -> int:
-    """Number of edges used by more than two faces."""
-    _, counts = edge_face_counts(faces)
-    return int((counts > 2).sum())
+    """Number of edges used by more than two faces (`faces: (m, 3)` int): each
+    undirected edge keyed by one int64 and counted in one 1-D sort."""
+    if len(faces) == 0:
+        return 0
+    corners = np.asarray(faces, dtype=np.int64)
+    heads, tails = corners.ravel(), corners[:, [1, 2, 0]].ravel()
+    lo, hi = np.minimum(heads, tails), np.maximum(heads, tails)
+    key = np.sort(lo * (int(hi.max()) + 1) + hi)
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    return int((np.diff(np.r_[starts, len(key)]) > 2).sum())
 
 
 def _face_graph(faces: np.ndarray):

@@ -233,15 +233,25 @@ class _Judge:
         samples = int(np.clip(SAMPLES_PER_FACE * len(faces), MIN_SAMPLES, samples))
         self.vertices, self.faces, self.samples = vertices, faces, samples
         self.reference = SurfaceDistance(vertices, faces)
-        topo = _topology_faces(vertices, faces)
+        # a candidate's topology is judged on the original's weld: its vertices are a
+        # subset of the original's, so welding them again would only repeat this
+        self.topology = _clean.weld_map(vertices, _clean.weld_tolerance(vertices))
+        topo = self.topology[faces]
         self.non_manifold = _clean.non_manifold_edge_count(topo)
         # normals on the welded surface, so a UV seam does not split a corner's normal
-        welded = vertex_normals(vertices, topo)
-        self.normals = welded[_clean.weld_map(vertices, _clean.weld_tolerance(vertices))]
+        self.normals = vertex_normals(vertices, topo)[self.topology]
         self.fans = _vertex_fans(vertices, faces)
         # the original side's query points, reused: which vertex or face each lies on
         self.queries, self.query_vertex, self.query_face = query_points_on(vertices, faces, samples)
         self.face_keys = _face_keys(faces, len(vertices))
+        # the original faces by their oriented key, sorted, for exact lookups: a
+        # candidate face that IS an original face (same corners, same winding) needs no
+        # flip or degeneracy test
+        oriented = _oriented_keys(faces, len(vertices))
+        self.oriented_order = None if oriented is None else np.argsort(oriented, kind="stable")
+        self.oriented_sorted = None if oriented is None else oriented[self.oriented_order]
+        self.sorted_face_keys = None if self.face_keys is None else np.sort(self.face_keys)
+        self.degenerate = _clean.degenerate_faces(vertices, faces, 0.0) if len(faces) else np.zeros(0, dtype=bool)
         self._vertex_tree = None
         # Per original query point, the last exact distance measured and the face it
         # was measured to (key, -1: none). A later candidate that still has that face is
@@ -270,19 +280,31 @@ class _Judge:
         `threshold` either way, flipped faces, new non-manifold edges (none when
         threshold is None)."""
         f = np.asarray(f, dtype=np.int64).reshape(-1, 3)
-        if len(f):
+        original = np.zeros(len(f), dtype=bool)  # same corners and winding as an original face
+        if len(f) and kept is not None and self.oriented_sorted is not None:
+            original, which = _lookup(self.oriented_sorted, _oriented_keys(kept[f], len(self.vertices)))
+            degenerate = np.zeros(len(f), dtype=bool)
+            degenerate[original] = self.degenerate[self.oriented_order[which[original]]]
+            degenerate[~original] = _clean.degenerate_faces(v, f[~original], 0.0)
+            keep = ~degenerate
+            keep[keep] = _first_of_each(_face_keys(kept[f[keep]], len(self.vertices)))
+            f, original = f[keep], original[keep]
+        elif len(f):
             f = f[~_clean.degenerate_faces(v, f, 0.0)]
             f = f[~_clean.duplicate_faces(f)]
         if len(f) == 0:
             return Simplified(v, f, kept, math.inf, 0, 0), np.zeros((0, 3))
         bad, how_far = [], []
         if kept is not None:  # vertices are the original ones: judge flips at the corners
-            flips = flipped_by_fans(self.fans, kept, v, f, bad)
+            # an original face agrees with itself: only the others can have turned over
+            flips = flipped_by_fans(self.fans, kept, v, f[~original], bad)
             how_far.append(np.full(len(bad[0]), np.inf))
         else:
             flips = flipped_face_count(self.reference, v, f, tolerance)
         # vertices are the original ones (meshoptimizer): so are some faces
         cand_keys = None if kept is None else _face_keys(kept[f], len(self.vertices))
+        # judged on the original's weld, in the original's vertex numbering
+        topo = None if kept is None else self.topology[kept[f]]
         used, f = _clean.compact(f, len(v))
         v = v[used]
         kept = None if kept is None else kept[used]
@@ -290,9 +312,12 @@ class _Judge:
         if cand_keys is not None and self.face_keys is not None:
             # A point on a face both meshes share, or on an original vertex, is at
             # distance 0 from both surfaces: measuring it cannot change the maximum.
-            shared = np.isin(self.face_keys, cand_keys)
-            skip = np.isin(self.query_vertex, kept) | ((self.query_face >= 0) & shared[self.query_face])
-            own = own[(own_vertex < 0) & ~((own_face >= 0) & np.isin(cand_keys, self.face_keys)[own_face])]
+            shared = _lookup(np.sort(cand_keys), self.face_keys)[0]
+            on_original = _lookup(self.sorted_face_keys, cand_keys)[0]
+            is_kept = np.zeros(len(self.vertices) + 1, dtype=bool)
+            is_kept[kept] = True
+            skip = is_kept[self.query_vertex] | ((self.query_face >= 0) & shared[self.query_face])
+            own = own[(own_vertex < 0) & ~((own_face >= 0) & on_original[own_face])]
         elif kept is not None:
             skip = np.isin(self.query_vertex, kept)
         else:
@@ -312,7 +337,8 @@ class _Judge:
         d_there = np.zeros(len(index))
         d_there[~bounded] = self._distances(target, index[~bounded], cand_keys)
         there = float(d_there.max(initial=0.0))
-        topo = _topology_faces(v, f)
+        if topo is None:
+            topo = _topology_faces(v, f)
         added = _clean.non_manifold_edge_count(topo) - self.non_manifold
         if bounded.any() and there <= threshold and back <= tolerance and flips == 0 and added <= 0:
             d_there[bounded] = self._distances(target, index[bounded], cand_keys)
@@ -326,7 +352,8 @@ class _Judge:
         if added > 0 and threshold is not None:
             edges, counts = _clean.edge_face_counts(topo)
             e = edges[counts > 2]
-            bad.append((v[e[:, 0]] + v[e[:, 1]]) / 2.0)
+            at = self.vertices if kept is not None else v  # topo's numbering
+            bad.append((at[e[:, 0]] + at[e[:, 1]]) / 2.0)
             how_far.append(np.full(len(e), np.inf))
         where = np.concatenate(bad) if bad else np.zeros((0, 3))
         self.how_far = np.concatenate(how_far) if how_far else np.zeros(0)
@@ -339,6 +366,35 @@ class _Judge:
         if cand_keys is not None and len(index):
             self.bound[index], self.bound_key[index] = d, cand_keys[face]
         return d
+
+
+def _oriented_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray | None:
+    """(m,) int64 key of each face's corners in winding order, rotated to start at the
+    smallest (the same oriented face however it is rotated), or None past 63 bits."""
+    if n_vertices >= 2_000_000:
+        return None
+    f = np.asarray(faces, dtype=np.int64)
+    start = np.argmin(f, axis=1)
+    rows = np.arange(len(f))
+    a, b, c = f[rows, start], f[rows, (start + 1) % 3], f[rows, (start + 2) % 3]
+    return (a * n_vertices + b) * n_vertices + c
+
+
+def _lookup(sorted_keys: np.ndarray, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which of `keys: (k,)` are in `sorted_keys: (s,)` (ascending), and where: (found
+    (k,) bool, position (k,) int64, meaningful where found)."""
+    pos = np.searchsorted(sorted_keys, keys)
+    found = np.zeros(len(keys), dtype=bool)
+    inside = pos < len(sorted_keys)
+    found[inside] = sorted_keys[pos[inside]] == keys[inside]
+    return found, pos
+
+
+def _first_of_each(keys: np.ndarray) -> np.ndarray:
+    """(k,) bool: True at the first occurrence of each key (duplicate_faces' rule)."""
+    first = np.zeros(len(keys), dtype=bool)
+    first[np.unique(keys, return_index=True)[1]] = True
+    return first
 
 
 def _face_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray | None:
