@@ -57,7 +57,7 @@ def info(sources: Path):
 @main.command()
 @SOURCES
 @OUT
-@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="worker processes (default: cores)")
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="cores to use: worker processes, and threads of a task running alone (default: all)")
 @click.option("--only", multiple=True, metavar="ASSET", help="build just this asset's package (repeatable)")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder (default: OUT/.cache)")
 @click.option("--explain", is_flag=True, help="say for each task why it ran or was skipped")

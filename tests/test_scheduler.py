@@ -132,16 +132,18 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
 
     monkeypatch.setattr(os, "cpu_count", lambda: 4)
     out = tmp_path / "build"
-    sched = Scheduler(out, jobs=2)
 
-    def share() -> int:
+    def share(jobs: int | None) -> int:
+        sched = Scheduler(out, jobs=jobs)
         state = sched._load_state()
         return sched._threads_per_worker(check_graph(toy_graph.tasks(src, out)), state, FileHasher(state.get("hashes")))
 
-    assert share() == 2  # cold: both upper tasks start at once
+    # cold: both upper tasks start at once; --jobs caps the cores the build may use
+    assert (share(None), share(2), share(1)) == (2, 1, 1)
     toy_graph.build(src, out)
     (src / "a.txt").write_text("changed")
-    assert share() == 4  # one chain, upper:a then join: one task at a time
+    # one chain, upper:a then join: one task at a time gets the build's whole share
+    assert (share(None), share(2), share(1)) == (4, 2, 1)
 
     for name in ("IGL_NUM_THREADS", "OMP_NUM_THREADS"):
         monkeypatch.delenv(name, raising=False)

@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import config
 from ..builder.graph import Task
+from ..builder.spare import beside
 from ..export import names
 from . import placements as placing
 from . import scene_gltf, stage_usd, world_sdf
@@ -92,16 +93,22 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
 
     out = Path(staging) / "scene"
     out.mkdir(parents=True, exist_ok=True)
-    world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
-                    terrain_model=tname, sun=sun)
-    stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
-                    crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
-                    articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
-    scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
-                     origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
 
-    terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
-    findings = check_placements(site, fp, placed, manifests, terrain_z)
+    def sdf_usd_and_checks():
+        world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
+                        terrain_model=tname, sun=sun)
+        stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
+                        crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
+                        articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
+        terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
+        return check_placements(site, fp, placed, manifests, terrain_z)
+
+    def gltf():
+        scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
+                         origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
+
+    # the glTF scene (the largest share) beside the rest, when a core is spare
+    findings, _ = beside(sdf_usd_and_checks, gltf)
     lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     record = {
         "site": site.name, "crs": site.crs,
