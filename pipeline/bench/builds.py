@@ -2,7 +2,9 @@
 
 Measured (each under pipeline.bench.measure: wall time, largest process's ru_maxrss,
 sampled peak of the whole tree's RSS):
-- cold builds with 1 and 2 workers (fresh build folder and cache each time);
+- cold builds with --jobs 1 and 2 (fresh build folder and cache each time): one core
+  (one worker, single-threaded) against two (two workers; a task running alone gets
+  both cores);
 - no-op rebuild (nothing changed), from the CLI and in-process;
 - one-asset edits, two kinds: the asset.toml `description` of one asset rewritten
   (metadata: its package task and the scene rerun, its geometry task does not), and
