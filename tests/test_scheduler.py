@@ -129,6 +129,7 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
     """Native thread pools: each worker gets cores / tasks that can start together."""
     from pipeline.builder.graph import FileHasher, check_graph
     from pipeline.builder.scheduler import Scheduler, init_worker
+    from pipeline.builder.spare import SHARE_VARIABLE
 
     monkeypatch.setattr(os, "cpu_count", lambda: 4)
     out = tmp_path / "build"
@@ -148,6 +149,7 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
     for name in ("IGL_NUM_THREADS", "OMP_NUM_THREADS"):
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")  # the user's setting is kept
+    monkeypatch.setenv(SHARE_VARIABLE, "1")  # restored after the test: init_worker sets it
     init_worker(3, blender=False)
-    assert (os.environ["IGL_NUM_THREADS"], os.environ["OMP_NUM_THREADS"], os.environ["OPENBLAS_NUM_THREADS"]) == (
-        "3", "3", "1")
+    assert (os.environ["IGL_NUM_THREADS"], os.environ["OMP_NUM_THREADS"], os.environ["OPENBLAS_NUM_THREADS"],
+            os.environ[SHARE_VARIABLE]) == ("3", "3", "1", "3")
