@@ -281,14 +281,17 @@ class _Judge:
         threshold is None)."""
         f = np.asarray(f, dtype=np.int64).reshape(-1, 3)
         original = np.zeros(len(f), dtype=bool)  # same corners and winding as an original face
+        cand_keys = None  # each kept face's vertex-set key, when vertices are the original ones
         if len(f) and kept is not None and self.oriented_sorted is not None:
             original, which = _lookup(self.oriented_sorted, _oriented_keys(kept[f], len(self.vertices)))
             degenerate = np.zeros(len(f), dtype=bool)
             degenerate[original] = self.degenerate[self.oriented_order[which[original]]]
             degenerate[~original] = _clean.degenerate_faces(v, f[~original], 0.0)
             keep = ~degenerate
-            keep[keep] = _first_of_each(_face_keys(kept[f[keep]], len(self.vertices)))
-            f, original = f[keep], original[keep]
+            cand_keys = _face_keys(kept[f[keep]], len(self.vertices))
+            first = _first_of_each(cand_keys)
+            keep[keep] = first
+            f, original, cand_keys = f[keep], original[keep], cand_keys[first]
         elif len(f):
             f = f[~_clean.degenerate_faces(v, f, 0.0)]
             f = f[~_clean.duplicate_faces(f)]
@@ -302,7 +305,8 @@ class _Judge:
         else:
             flips = flipped_face_count(self.reference, v, f, tolerance)
         # vertices are the original ones (meshoptimizer): so are some faces
-        cand_keys = None if kept is None else _face_keys(kept[f], len(self.vertices))
+        if cand_keys is None and kept is not None:
+            cand_keys = _face_keys(kept[f], len(self.vertices))
         # judged on the original's weld, in the original's vertex numbering
         topo = None if kept is None else self.topology[kept[f]]
         used, f = _clean.compact(f, len(v))
