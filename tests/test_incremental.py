@@ -136,6 +136,28 @@ def test_sample_one_asset_edit_reexports_only_its_chain(tmp_path):
     assert ran(edit) == {"geometry:junction_box", "asset:junction_box", "scene"}
 
 
+def test_floorplan_memo_is_shared_by_the_planner_and_the_scene_tasks(tmp_path, monkeypatch):
+    """The planner is handed the sources folder as the user typed it (often relative),
+    the scene tasks an absolute one: both find the one memo entry, so an edit build
+    parses the DXF at most once, not once in the plan and again in the scene task."""
+    from pipeline.builder import tasks
+    from pipeline.ingest import floorplan
+    from pipeline.scene import assemble
+
+    mini_sources.make(tmp_path / "src")
+    monkeypatch.chdir(tmp_path)
+    build = tmp_path / "build"
+    planned = tasks.load_sources(Path("src"), memo=build / floorplan.MEMO_NAME).floorplan
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the DXF was parsed again")
+
+    monkeypatch.setattr(floorplan, "read_floorplan", refuse)
+    _, in_scene, _ = assemble._load((tmp_path / "src").resolve(), build)
+    assert in_scene.placements == planned.placements
+    assert tasks.load_sources(Path("src"), memo=build / floorplan.MEMO_NAME).floorplan.placements == planned.placements
+
+
 def test_floorplan_memo_skips_the_dxf_until_it_changes(tmp_path, monkeypatch):
     """A no-op build plans from the memo of the last floor plan read (no DXF parse);
     a new DXF content or a new set of levels reads the drawing again."""

@@ -129,7 +129,7 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
     """Native thread pools: each worker gets cores / tasks that can start together."""
     from pipeline.builder.graph import FileHasher, check_graph
     from pipeline.builder.scheduler import Scheduler, init_worker
-    from pipeline.builder.spare import SHARE_VARIABLE
+    from pipeline.spare import SHARE_VARIABLE
 
     monkeypatch.setattr(os, "cpu_count", lambda: 4)
     out = tmp_path / "build"

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from fixtures_assets import articulated_asset
-from pipeline.builder import spare
+from pipeline import spare
 from pipeline.builder.tasks import write_package
 from pipeline.errors import UserError
 

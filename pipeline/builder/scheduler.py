@@ -29,7 +29,7 @@ from pathlib import Path
 from ..errors import UserError
 from .cache import Cache
 from .graph import FileHasher, Task, check_graph, explain, record
-from .spare import SHARE_VARIABLE
+from ..spare import SHARE_VARIABLE
 
 STATE_FILE = ".state.json"
 LOCK_FILE = ".lock"

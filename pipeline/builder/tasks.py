@@ -27,7 +27,7 @@ from .. import config, ir
 from ..errors import UserError
 from ..export import names
 from .graph import Task, code_version, sha256_file
-from .spare import beside
+from ..spare import beside
 
 GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
                  "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.validate.checks",

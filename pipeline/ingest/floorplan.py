@@ -203,6 +203,9 @@ def read_floorplan_memo(path: Path, assets: set[str], levels: set[str], memo: Pa
     import json
     import os
 
+    # one spelling of the path: the planner is handed a relative sources folder and the
+    # scene tasks an absolute one, and each would otherwise miss the other's entry
+    path = Path(path).resolve()
     key = None
     if memo is not None and path.is_file():
         h = hashlib.sha256(path.read_bytes())

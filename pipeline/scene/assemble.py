@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import config
 from ..builder.graph import Task
-from ..builder.spare import beside
+from ..spare import beside
 from ..export import names
 from . import placements as placing
 from . import scene_gltf, stage_usd, world_sdf
