@@ -125,6 +125,32 @@ def test_longest_task_starts_first(src, tmp_path, costly):
     assert (tmp_path / "build" / "joined.txt").read_text() == "ALPHA+BETA"
 
 
+def test_workers_import_bpy_only_for_a_task_that_will_run_and_reads_a_blend(src, tmp_path):
+    """A build whose tasks to run read no .blend (a metadata or floor-plan edit) starts
+    its workers without bpy, even though the graph has Blender tasks that are up to date."""
+    from pipeline.builder.graph import FileHasher, check_graph
+    from pipeline.builder.scheduler import Scheduler
+
+    out = tmp_path / "build"
+
+    def graph():
+        tasks = toy_graph.tasks(src, out)
+        tasks[0].needs_blender = True  # upper:a stands for a geometry task reading a .blend
+        return check_graph(tasks)
+
+    def needs_bpy() -> bool:
+        sched = Scheduler(out)
+        state = sched._load_state()
+        return sched._worker_setup(graph(), state, FileHasher(state.get("hashes")))[1]
+
+    assert needs_bpy()  # cold: upper:a will run
+    Scheduler(out).run(graph())
+    (src / "b.txt").write_text("changed")
+    assert not needs_bpy()  # upper:b and join run; upper:a is up to date
+    (src / "a.txt").write_text("changed too")
+    assert needs_bpy()
+
+
 def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypatch):
     """Native thread pools: each worker gets cores / tasks that can start together."""
     from pipeline.builder.graph import FileHasher, check_graph
@@ -137,7 +163,7 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
     def share(jobs: int | None) -> int:
         sched = Scheduler(out, jobs=jobs)
         state = sched._load_state()
-        return sched._threads_per_worker(check_graph(toy_graph.tasks(src, out)), state, FileHasher(state.get("hashes")))
+        return sched._worker_setup(check_graph(toy_graph.tasks(src, out)), state, FileHasher(state.get("hashes")))[0]
 
     # cold: both upper tasks start at once; --jobs caps the cores the build may use
     assert (share(None), share(2), share(1)) == (2, 1, 1)

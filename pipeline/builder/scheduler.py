@@ -4,7 +4,7 @@
   one whose key is in the cache is restored; the rest run in workers.
 - Workers are spawned once and serve many tasks; a worker that will read .blend
   files imports bpy once at start, and each gets its share of the cores for native
-  thread pools (`init_worker`, `_threads_per_worker`).
+  thread pools (`init_worker`, `_worker_setup`).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
@@ -164,21 +164,25 @@ class Scheduler:
                     folder.rmdir()
         return meta
 
-    def _threads_per_worker(self, order: list[Task], state: dict, hasher: FileHasher) -> int:
-        """Cores per worker for native thread pools and spare.beside, split among the
-        tasks that can run side by side at the start: an edit that reruns one asset's
-        chain gives its task every core of the build's share, a cold build gives each
-        worker its part of it."""
+    def _worker_setup(self, order: list[Task], state: dict, hasher: FileHasher) -> tuple[int, bool]:
+        """What the workers are started with, from the tasks this build will run:
+        (cores per worker for native thread pools and spare.beside, whether they
+        import bpy). The cores are split among the tasks that can start side by side:
+        an edit that reruns one asset's chain gives its task every core of the build's
+        share, a cold build gives each worker its part of it. bpy (a second or so per
+        worker) only when a task that will run reads a .blend: an edit of an asset's
+        metadata or of the floor plan reads none."""
         keys: dict[str, str] = {}
-        stale = set()
+        stale = []
         for t in order:  # keys need only inputs and dependency keys, not outputs
             keys[t.name] = t.compute_key(hasher, keys, self.build)
             previous = state["tasks"].get(t.name)
             fresh = previous and previous.get("key") == keys[t.name] and self._outputs_in_place(previous)
             if not fresh and not self.cache.has(keys[t.name]):
-                stale.add(t.name)
-        width = sum(1 for t in order if t.name in stale and not stale.intersection(t.deps))
-        return max(1, self.cores // max(1, min(self.jobs, width)))
+                stale.append(t)
+        names = {t.name for t in stale}
+        width = sum(1 for t in stale if not names.intersection(t.deps))
+        return max(1, self.cores // max(1, min(self.jobs, width))), any(t.needs_blender for t in stale)
 
     # --- run --------------------------------------------------------------------
     def run(self, tasks: list[Task], stop_on_error: bool = True) -> BuildReport:
@@ -193,7 +197,6 @@ class Scheduler:
             pending = {t.name: t for t in order}
             done: set[str] = set()
             running: dict[Future, Task] = {}
-            needs_bpy = any(t.needs_blender for t in order)
             pool = None
             try:
                 while pending or running:
@@ -227,7 +230,7 @@ class Scheduler:
                             continue
                         if pool is None:
                             ctx = multiprocessing.get_context("spawn")
-                            threads = self._threads_per_worker(order, state, hasher)
+                            threads, needs_bpy = self._worker_setup(order, state, hasher)
                             pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=init_worker,
                                                        initargs=(threads, needs_bpy))
                         staging = self.build / ".staging" / task.key
