@@ -59,6 +59,51 @@ def test_terrain_is_flat_at_levels_and_slopes_at_the_ratio():
     assert names.count("ground") == 1 and sum(n.startswith("slope") for n in names) == 2
 
 
+def _height_by_every_triangle(asset: ir.Asset, en: np.ndarray) -> np.ndarray:
+    """The highest surface under each point, testing it against every triangle."""
+    out = np.full(len(en), np.nan)
+    for _, v in asset.visuals():
+        for a, b, c in v.mesh.vertices[v.mesh.faces]:
+            det = (b[0] - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (b[1] - a[1])
+            if abs(det) <= 1e-12:
+                continue
+            for i, (x, y) in enumerate(en):
+                l1 = ((x - a[0]) * (c[1] - a[1]) - (c[0] - a[0]) * (y - a[1])) / det
+                l2 = ((b[0] - a[0]) * (y - a[1]) - (x - a[0]) * (b[1] - a[1])) / det
+                if min(l1, l2, 1 - l1 - l2) >= -1e-9:
+                    out[i] = np.fmax(out[i], (1 - l1 - l2) * a[2] + l1 * b[2] + l2 * c[2])
+    return out
+
+
+def test_height_at_binned_matches_every_triangle_tested():
+    """The grid only skips pairs that cannot meet: on random points and on the
+    triangles' own corners and edge midpoints (the hard cases) the heights match
+    a test of every point against every triangle."""
+    pfs = [ir.Platform("L1", np.array([[0, 0], [50, 0], [50, 40], [0, 40]])),
+           ir.Platform("L2", np.array([[0, 60], [30, 60], [50, 90], [0, 90]]))]
+    t = terrain.terrain_asset(FlatSite(), pfs, IdentityGeoref(), "t")
+    rng = np.random.default_rng(3)
+    corners = np.concatenate([v.mesh.vertices[:, :2] for _, v in t.visuals()])
+    mids = np.concatenate([(v.mesh.vertices[v.mesh.faces[:, 0], :2] + v.mesh.vertices[v.mesh.faces[:, 1], :2]) / 2
+                           for _, v in t.visuals()])
+    en = np.r_[rng.uniform(-40, 90, (300, 2)) + [0, 10], corners[::3], mids[::3], [[-500.0, -500.0]]]
+    z = terrain.height_at(t, en)
+    np.testing.assert_allclose(z, _height_by_every_triangle(t, en), rtol=0, atol=1e-9)
+    assert np.isfinite(z[:-1]).sum() > 300 and np.isnan(z[-1])
+
+
+def test_points_in_polygon_concave_grid():
+    """An L shape: inside the 10 m square and not in its 5 m upper-right notch; points
+    on any edge (the notch's too) count as inside."""
+    ell = np.array([[0, 0], [10, 0], [10, 5], [5, 5], [5, 10], [0, 10]], dtype=float)
+    g = np.arange(-1.0, 11.01, 0.5)
+    pts = np.array(np.meshgrid(g, g)).reshape(2, -1).T
+    x, y = pts[:, 0], pts[:, 1]
+    expected = (x >= 0) & (x <= 10) & (y >= 0) & (y <= 10) & ~((x > 5) & (y > 5))
+    np.testing.assert_array_equal(checks.points_in_polygon(pts, ell), expected)
+    assert [checks.point_in_polygon(p, ell) for p in pts[:40]] == list(expected[:40])
+
+
 def test_point_in_polygon_edges_count_inside():
     sq = np.array([[0, 0], [10, 0], [10, 10], [0, 10]], dtype=float)
     assert checks.point_in_polygon(np.array([5.0, 5.0]), sq)

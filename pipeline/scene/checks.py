@@ -25,20 +25,25 @@ def finding(code: str, severity: str, site: str, message: str) -> dict:
 
 def point_in_polygon(p: np.ndarray, poly: np.ndarray) -> bool:
     """Even-odd rule. p: (2,), poly: (k, 2); points on an edge count as inside."""
-    x, y = p
-    inside = False
-    n = len(poly)
-    for i in range(n):
-        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % n]
-        if min(y1, y2) <= y <= max(y1, y2) and min(x1, x2) <= x <= max(x1, x2):
-            cross = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
-            if abs(cross) < 1e-9 * max(1.0, abs(x2 - x1) + abs(y2 - y1)):
-                return True
-        if (y1 > y) != (y2 > y):
-            xi = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
-            if x < xi:
-                inside = not inside
-    return inside
+    return bool(points_in_polygon(np.asarray(p, dtype=np.float64).reshape(1, 2), poly)[0])
+
+
+def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd rule for many points at once. points: (n, 2), poly: (k, 2);
+    returns (n,) bool, points on an edge inside."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    poly = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+    x, y = points[:, 0:1], points[:, 1:2]  # (n, 1) against the (k,) edges
+    x1, y1 = poly[:, 0], poly[:, 1]
+    x2, y2 = np.roll(x1, -1), np.roll(y1, -1)
+    within = ((np.minimum(y1, y2) <= y) & (y <= np.maximum(y1, y2))
+              & (np.minimum(x1, x2) <= x) & (x <= np.maximum(x1, x2)))
+    cross = (x2 - x1) * (y - y1) - (y2 - y1) * (x - x1)
+    on_edge = (within & (np.abs(cross) < 1e-9 * np.maximum(1.0, np.abs(x2 - x1) + np.abs(y2 - y1)))).any(axis=1)
+    straddles = (y1 > y) != (y2 > y)
+    dy = np.where(y2 != y1, y2 - y1, 1.0)
+    crossings = (straddles & (x < x1 + (y - y1) * (x2 - x1) / dy)).sum(axis=1)
+    return on_edge | (crossings % 2 == 1)
 
 
 def footprint(pose: np.ndarray, bounds) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
@@ -74,11 +79,15 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
     platforms: dict[str, list[np.ndarray]] = {}
     for pf in fp.platforms:
         platforms.setdefault(pf.level, []).append(np.asarray(pf.outline))
-    on_platform = []
-    for pl in placed:
+    on_platform = np.zeros(len(placed), dtype=bool)
+    plan_xy = np.array([[pl.placement.x, pl.placement.y] for pl in placed]).reshape(-1, 2)
+    levels = np.array([pl.placement.level for pl in placed], dtype=object)
+    for level, outlines in platforms.items():
+        on_level = np.nonzero(levels == level)[0]
+        for poly in outlines:
+            on_platform[on_level] |= points_in_polygon(plan_xy[on_level], poly)
+    for pl, inside in zip(placed, on_platform):
         p = pl.placement
-        inside = any(point_in_polygon(np.array([p.x, p.y]), poly) for poly in platforms.get(p.level, []))
-        on_platform.append(inside)
         if not inside:
             out.append(finding("PLACE003", "warning", p.tag,
                                f"at plan ({p.x:.3f}, {p.y:.3f}) outside every PLATFORM_{p.level} outline"

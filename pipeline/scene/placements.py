@@ -69,19 +69,21 @@ def choose_lods(placed: list[Placed], manifests: dict[str, dict], eyes: np.ndarr
     """For each placement the coarsest LOD whose measured error, seen from the nearest
     inspection point (to the nearest point of the placement's bounding box), stays
     under the site's screen-space tolerance. No inspection point: LOD 0."""
+    if not placed:
+        return []
+    if len(eyes) == 0:
+        return [Placed(pl.placement, pl.pose, pl.yaw, 0, float("inf")) for pl in placed]
+    inverse = np.linalg.inv(np.array([pl.pose for pl in placed]))  # (n, 4, 4)
+    eyes_h = np.c_[eyes, np.ones(len(eyes))]
     out = []
-    for pl in placed:
+    for pl, to_local in zip(placed, inverse):
         m = manifests[pl.placement.asset_id]
-        lods = m["lods"]
-        if len(eyes) == 0:
-            out.append(Placed(pl.placement, pl.pose, pl.yaw, 0, float("inf")))
-            continue
         lo, hi = np.array(m["bounds"][0]), np.array(m["bounds"][1])
-        local = (np.c_[eyes, np.ones(len(eyes))] @ np.linalg.inv(pl.pose).T)[:, :3]
+        local = (eyes_h @ to_local.T)[:, :3]
         nearest = np.clip(local, lo, hi)
         d = float(np.min(np.linalg.norm(local - nearest, axis=1)))
         level = 0
-        for lod in lods:
+        for lod in m["lods"]:
             px = screen_error_px(lod["error_m"], d, site.reference_hfov_rad, site.reference_width_px)
             if px <= site.screen_tolerance_px and lod["level"] < len(m["lod_models"]) + 1:
                 level = lod["level"]

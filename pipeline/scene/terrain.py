@@ -146,27 +146,70 @@ def terrain_asset(site: Site, platforms: list[ir.Platform], georef, name: str) -
                     description=f"terraced terrain of {site.name}")
 
 
-def height_at(asset: ir.Asset, en: np.ndarray, chunk: int = 256) -> np.ndarray:
+def height_at(asset: ir.Asset, en: np.ndarray) -> np.ndarray:
     """Terrain height (ENU z) under each point en: (n, 2), the highest surface hit;
-    NaN where no surface lies under a point. Points are tested against every triangle
-    at once, `chunk` points at a time (a (chunk, t) barycentric table)."""
+    NaN where no surface lies under a point.
+
+    Each surface's triangles are binned on a grid of about their own size, and a
+    point is tested only against the triangles of its cell: the scene's thousands of
+    placements against a terrain of thousands of triangles cost what their pairs
+    that can meet cost, not every pair."""
     en = np.asarray(en, dtype=np.float64).reshape(-1, 2)
     out = np.full(len(en), np.nan)
     for _, v in asset.visuals():
-        m = v.mesh
-        tri = m.vertices[m.faces]  # (t, 3, 3)
-        a, b, c = tri[:, 0, :2], tri[:, 1, :2], tri[:, 2, :2]
+        point, tri = _candidate_pairs(v.mesh, en)
+        if len(point) == 0:
+            continue
+        corners = v.mesh.vertices[v.mesh.faces[tri]]  # (pairs, 3, 3)
+        a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
         det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
         ok = np.abs(det) > 1e-12
         safe = np.where(ok, det, 1.0)
-        for start in range(0, len(en), chunk):
-            px, py = en[start:start + chunk, 0:1], en[start:start + chunk, 1:2]  # (p, 1) against (t,)
-            l1 = ((px - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (py - a[:, 1])) / safe
-            l2 = ((b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (px - a[:, 0]) * (b[:, 1] - a[:, 1])) / safe
-            l0 = 1 - l1 - l2
-            inside = ok & (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
-            z = np.where(inside, l0 * tri[:, 0, 2] + l1 * tri[:, 1, 2] + l2 * tri[:, 2, 2], -np.inf).max(axis=1)
-            block = out[start:start + chunk]
-            hit = np.isfinite(z)
-            block[hit] = np.fmax(block[hit], z[hit])
+        px, py = en[point, 0], en[point, 1]
+        l1 = ((px - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (py - a[:, 1])) / safe
+        l2 = ((b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (px - a[:, 0]) * (b[:, 1] - a[:, 1])) / safe
+        l0 = 1 - l1 - l2
+        inside = ok & (l0 >= -1e-9) & (l1 >= -1e-9) & (l2 >= -1e-9)
+        z = np.full(len(en), -np.inf)
+        np.maximum.at(z, point[inside], (l0 * a[:, 2] + l1 * b[:, 2] + l2 * c[:, 2])[inside])
+        hit = np.isfinite(z)
+        out[hit] = np.fmax(out[hit], z[hit])
     return out
+
+
+def _candidate_pairs(mesh: ir.Mesh, en: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(point index, triangle index) of every point and triangle sharing a grid cell:
+    a superset of the pairs where the point lies in the triangle."""
+    empty = np.zeros(0, dtype=np.int64)
+    if len(mesh.faces) == 0 or len(en) == 0:
+        return empty, empty
+    xy = mesh.vertices[mesh.faces][:, :, :2]  # (t, 3, 2)
+    lo, hi = xy.min(axis=1), xy.max(axis=1)
+    # the inside test's tolerance reaches a hair beyond the triangle's box
+    pad = 1e-6 * np.maximum(1.0, (hi - lo).max(axis=1, keepdims=True))
+    lo, hi = lo - pad, hi + pad
+    cell = max(float(np.median((hi - lo).max(axis=1))), 1e-6)
+    origin = lo.min(axis=0)
+    first = np.floor((lo - origin) / cell).astype(np.int64)
+    last = np.floor((hi - origin) / cell).astype(np.int64)
+    point_cell = np.floor((en - origin) / cell).astype(np.int64)
+    columns = int(max(last[:, 1].max(), point_cell[:, 1].max(initial=0))) + 1
+    # every (triangle, cell) of the triangle's box, as a sorted table of cell keys
+    span = last - first + 1
+    per_tri = span[:, 0] * span[:, 1]
+    tri = np.repeat(np.arange(len(lo)), per_tri)
+    k = np.arange(len(tri)) - np.repeat(np.cumsum(per_tri) - per_tri, per_tri)
+    cx = first[tri, 0] + k // span[tri, 1]
+    cy = first[tri, 1] + k % span[tri, 1]
+    keys = cx * columns + cy
+    order = np.argsort(keys, kind="stable")
+    keys, tri = keys[order], tri[order]
+    # each point against the run of its cell's triangles (points off the grid: none)
+    inside = (point_cell >= 0).all(axis=1) & (point_cell[:, 1] < columns)
+    pkey = np.where(inside, point_cell[:, 0] * columns + point_cell[:, 1], -1)
+    start = np.searchsorted(keys, pkey, side="left")
+    stop = np.where(inside, np.searchsorted(keys, pkey, side="right"), start)
+    count = stop - start
+    point = np.repeat(np.arange(len(en)), count)
+    offset = np.arange(len(point)) - np.repeat(np.cumsum(count) - count, count)
+    return point, tri[np.repeat(start, count) + offset]
