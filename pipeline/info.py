@@ -11,7 +11,7 @@ from rich.console import Console
 from rich.table import Table
 
 from . import config
-from .builder.graph import sha256_file
+from .digest import sha256_file
 from .errors import UserError
 
 

@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from lxml import etree
 
 from fixtures_assets import articulated_asset
-from pipeline.builder.tasks import write_package
+from pipeline.export.package import write_package
 from pipeline.cli import main
 from pipeline.errors import UserError
 from pipeline.export import manifest

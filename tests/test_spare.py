@@ -10,7 +10,7 @@ import pytest
 
 from fixtures_assets import articulated_asset
 from pipeline import spare
-from pipeline.builder.tasks import write_package
+from pipeline.export.package import write_package
 from pipeline.errors import UserError
 
 

@@ -14,7 +14,7 @@ import shutil
 import uuid
 from pathlib import Path
 
-from .graph import sha256_file
+from ..digest import sha256_file
 
 
 class Cache:

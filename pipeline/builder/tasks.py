@@ -21,21 +21,20 @@ import dataclasses
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from .. import config, ir
+from ..digest import sha256_file
 from ..errors import UserError
-from ..export import names
-from .graph import Task, code_version, sha256_file
+from .graph import Task, code_version
 from ..spare import beside
 
 GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
                  "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.validate.checks",
                  "pipeline.builder.irfile", "pipeline.builder.tasks")
-PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.validate.checks",
+PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.digest", "pipeline.validate.checks",
                 "pipeline.builder.irfile", "pipeline.builder.tasks")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
-              "pipeline.scene", "pipeline.export", "pipeline.geometry.transform", "pipeline.builder.tasks")
+              "pipeline.scene", "pipeline.export", "pipeline.digest", "pipeline.geometry.transform")
 # asset.toml keys only the package task reads (the readers get neutral values for them)
 METADATA_KEYS = ("description", "category", "mass_kg", "triangle_budget")
 IR_FOLDER = ".ir"
@@ -68,43 +67,6 @@ def asset_steps(cfg: config.AssetConfig) -> list[tuple[str, object]]:
         ("collision", collision_step(CollisionOptions(mode=cfg.collision_mode))),
         ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m))),
     ]
-
-
-def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object] | None = None
-                  ) -> tuple[dict[str, str], list[str], object]:
-    """Every format of one asset into models/<id>/, LOD variants beside it; the COLLADA
-    meshes (the largest share) beside the rest when the worker has a core to spare,
-    and `alongside()` (if given) with the rest. Returns (package-relative path ->
-    sha256, LOD variant model names, what alongside returned)."""
-    from ..export import PACKAGE_FORMATS, sdf, writer
-
-    folder = _inside(models, asset.id)
-    folder.mkdir(parents=True, exist_ok=True)
-
-    def the_rest():
-        for fmt in PACKAGE_FORMATS:
-            if fmt != "collada":
-                writer(fmt)(asset, folder)
-        lod_models = []
-        for level in range(1, asset.lod_count):
-            name = names.lod_model_name(asset.id, level)
-            variant = _inside(models, name)
-            variant.mkdir(parents=True, exist_ok=True)
-            sdf.write(asset, variant, lod=level, model_name=name)
-            lod_models.append(name)
-        return lod_models, alongside() if alongside is not None else None
-
-    (lod_models, extra), _ = beside(the_rest, lambda: writer("collada")(asset, folder))
-    outputs = {str(p.relative_to(folder)): sha256_file(p) for p in sorted(folder.rglob("*")) if p.is_file()}
-    return outputs, lod_models, extra
-
-
-def _inside(root: Path, name: str) -> Path:
-    """root/name, refusing any name that would leave root (ids come from users)."""
-    path = (root / name).resolve()
-    if path.parent != root.resolve():
-        raise UserError(root, name, "output path escapes the build folder")
-    return path
 
 
 def ir_path(asset_id: str) -> str:
@@ -164,6 +126,7 @@ def with_metadata(asset: ir.Asset, cfg: config.AssetConfig) -> ir.Asset:
 def build_asset(staging: Path, asset_toml: str, build: str) -> dict:
     """Task action: one asset's package from its geometry task's result."""
     from ..export import manifest
+    from ..export.package import write_package
     from ..validate.checks import Finding, as_dicts, budget_findings, check_asset
     from . import irfile
 
@@ -272,11 +235,20 @@ def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
 
 
 def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
-    """Terrain and scene tasks, when the scene assembly is available."""
-    try:
-        from ..scene import assemble  # noqa: F401
-    except ImportError:
-        return []
-    from ..scene.assemble import scene_task_specs
+    """The terrain task (the platform outlines -> its package) and the scene task
+    (every placed asset's package and the terrain -> the world in three formats)."""
+    from ..scene.assemble import build_scene, build_terrain, terrain_model_name
 
-    return scene_task_specs(p, sources, build, code_version(*SCENE_CODE))
+    code = code_version(*SCENE_CODE)
+    site = p.site
+    tname = terrain_model_name(site)
+    sources, build = Path(sources).resolve(), Path(build).resolve()
+    args = {"sources": str(sources), "build": str(build)}
+    inputs = (site.path.resolve(), (site.root / site.floorplan).resolve())
+    terrain = Task(name="terrain", stage="terrain", action=build_terrain, args=args, inputs=inputs,
+                   params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
+    placed_assets = sorted({pl.asset_id for pl in p.floorplan.placements})
+    scene = Task(name="scene", stage="scene", action=build_scene, args=args, inputs=inputs,
+                 deps=("terrain", *(f"asset:{a}" for a in placed_assets)),
+                 params={"site": site.name}, code=code, outputs=("scene/",))
+    return [terrain, scene]

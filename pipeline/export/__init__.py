@@ -1,7 +1,7 @@
 """One writer module per output format; `WRITERS` maps a format to its module.
 
 Each module exposes `write(asset: ir.Asset, folder: Path, ...) -> list[str]` and
-nothing else. Modules are imported when first asked for, so importing this package
+nothing else; `package` writes them all into one model folder. Modules are imported when first asked for, so importing this package
 costs nothing (pxr, pycollada and pillow load only when their writer runs).
 """
 

@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 
 from .. import config
-from ..builder.graph import Task
 from ..spare import beside
 from ..export import names
 from . import placements as placing
@@ -60,8 +59,8 @@ def scene_sun(site: config.Site, origin_llh) -> dict:
 
 def build_terrain(staging: Path, sources: str, build: str | None = None) -> dict:
     """Task action: the terrain package (all formats) into models/<site>_terrain/."""
-    from ..builder.tasks import write_package
     from ..export import manifest
+    from ..export.package import write_package
 
     site, fp, georef = _load(Path(sources), build and Path(build))
     name = terrain_model_name(site)
@@ -169,21 +168,3 @@ def _accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
     start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
     arr = np.frombuffer(binary, dtype=dtype, count=acc["count"] * width, offset=start)
     return arr.reshape(acc["count"], width) if width > 1 else arr
-
-
-def scene_task_specs(plan, sources: Path, build: Path, code: str) -> list[Task]:
-    """The terrain and scene tasks of a build plan."""
-    site = plan.site
-    tname = terrain_model_name(site)
-    sources = Path(sources).resolve()
-    inputs = (site.path.resolve(), (site.root / site.floorplan).resolve(), *(
-        cfg.path.resolve() for cfg in plan.assets.values()))
-    terrain = Task(name="terrain", stage="terrain", action=build_terrain,
-                   args={"sources": str(sources), "build": str(Path(build).resolve())},
-                   inputs=inputs[:2], params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
-    placed_assets = sorted({p.asset_id for p in plan.floorplan.placements})
-    scene = Task(name="scene", stage="scene", action=build_scene,
-                 args={"sources": str(sources), "build": str(Path(build).resolve())},
-                 inputs=inputs[:2], deps=("terrain", *(f"asset:{a}" for a in placed_assets)),
-                 params={"site": site.name}, code=code, outputs=("scene/",))
-    return [terrain, scene]
