@@ -92,6 +92,22 @@ def test_height_at_binned_matches_every_triangle_tested():
     assert np.isfinite(z[:-1]).sum() > 300 and np.isnan(z[-1])
 
 
+def test_height_at_one_huge_triangle_among_tiny_ones_and_points_far_off():
+    """A 2 km triangle among 0.1 m ones would cover 10^8 cells of the small ones' size:
+    the grid coarsens instead. A point a million km off, or NaN, meets no triangle."""
+    rng = np.random.default_rng(5)
+    corner = rng.uniform(0, 50, (400, 1, 3))
+    tiny = corner + np.array([[0, 0, 0], [0.1, 0, 0.01], [0, 0.1, 0.02]])
+    huge = np.array([[[-1000.0, -1000.0, 0.0], [1000.0, -1000.0, 0.0], [0.0, 1000.0, 10.0]]])
+    tris = np.concatenate([tiny, huge]).reshape(-1, 3)
+    mesh = ir.Mesh(tris, np.arange(len(tris)).reshape(-1, 3).astype(np.int32))
+    t = ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=(ir.Visual("v", "x", (mesh,)),)),))
+    en = np.r_[rng.uniform(-5, 55, (200, 2)), corner[:50, 0, :2] + 0.02, [[1e12, 0.0], [np.nan, 1.0]]]
+    z = terrain.height_at(t, en)
+    np.testing.assert_allclose(z, _height_by_every_triangle(t, en), rtol=0, atol=1e-9)
+    assert np.isfinite(z[:-2]).all() and np.isnan(z[-2:]).all()
+
+
 def test_points_in_polygon_concave_grid():
     """An L shape: inside the 10 m square and not in its 5 m upper-right notch; points
     on any edge (the notch's too) count as inside."""

@@ -188,12 +188,23 @@ def _candidate_pairs(mesh: ir.Mesh, en: np.ndarray) -> tuple[np.ndarray, np.ndar
     # the inside test's tolerance reaches a hair beyond the triangle's box
     pad = 1e-6 * np.maximum(1.0, (hi - lo).max(axis=1, keepdims=True))
     lo, hi = lo - pad, hi + pad
-    cell = max(float(np.median((hi - lo).max(axis=1))), 1e-6)
     origin = lo.min(axis=0)
-    first = np.floor((lo - origin) / cell).astype(np.int64)
-    last = np.floor((hi - origin) / cell).astype(np.int64)
-    point_cell = np.floor((en - origin) / cell).astype(np.int64)
-    columns = int(max(last[:, 1].max(), point_cell[:, 1].max(initial=0))) + 1
+    # cells of about a triangle's size; coarser while a few large triangles among many
+    # small ones would cover far more cells than there are triangles
+    cell = max(float(np.median((hi - lo).max(axis=1))), 1e-6)
+    while True:
+        first = np.floor((lo - origin) / cell).astype(np.int64)
+        last = np.floor((hi - origin) / cell).astype(np.int64)
+        if ((last - first + 1).prod(axis=1).sum()) <= 16 * len(lo) + 1024:
+            break
+        cell *= 2.0
+    top = last.max(axis=0)
+    columns = int(top[1]) + 1
+    with np.errstate(invalid="ignore"):
+        point_cell = np.floor((en - origin) / cell)
+    # a point beyond every triangle's box (or NaN) meets none: no key, no overflow
+    on_grid = ((point_cell >= 0) & (point_cell <= top)).all(axis=1)
+    point_cell = np.where(on_grid[:, None], point_cell, 0).astype(np.int64)
     # every (triangle, cell) of the triangle's box, as a sorted table of cell keys
     span = last - first + 1
     per_tri = span[:, 0] * span[:, 1]
@@ -204,11 +215,10 @@ def _candidate_pairs(mesh: ir.Mesh, en: np.ndarray) -> tuple[np.ndarray, np.ndar
     keys = cx * columns + cy
     order = np.argsort(keys, kind="stable")
     keys, tri = keys[order], tri[order]
-    # each point against the run of its cell's triangles (points off the grid: none)
-    inside = (point_cell >= 0).all(axis=1) & (point_cell[:, 1] < columns)
-    pkey = np.where(inside, point_cell[:, 0] * columns + point_cell[:, 1], -1)
+    # each point against the run of its cell's triangles
+    pkey = np.where(on_grid, point_cell[:, 0] * columns + point_cell[:, 1], -1)
     start = np.searchsorted(keys, pkey, side="left")
-    stop = np.where(inside, np.searchsorted(keys, pkey, side="right"), start)
+    stop = np.where(on_grid, np.searchsorted(keys, pkey, side="right"), start)
     count = stop - start
     point = np.repeat(np.arange(len(en)), count)
     offset = np.arange(len(point)) - np.repeat(np.cumsum(count) - count, count)
