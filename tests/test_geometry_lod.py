@@ -121,3 +121,44 @@ def test_lod_of_touching_cad_parts_adds_no_edge_defect_to_any_part():
             assert non_manifold <= authored[0] and wound <= authored[1], vis.name
             simplified += mesh.triangle_count < vis.lods[0].triangle_count
     assert simplified > 0  # the guard must not simply keep every authored mesh
+
+
+@pytest.mark.parametrize("budgets", [(0.004, 0.0045, 0.005), (0.006, 0.007, 0.008)])
+def test_levels_side_by_side_are_the_levels_one_after_the_other(monkeypatch, budgets):
+    """Side by side, each level's search learns its ceiling late (or after it ended);
+    the levels must still be exactly those of the searches one after the other, here
+    on budgets whose coarser searches cannot beat the finer level (the ceiling cuts)."""
+    from pipeline import spare
+
+    v, f = lod.insulator_mesh(sheds=8, segments=48, target_faces=12000)
+    mesh = C.clean_mesh(ir.Mesh(v, f))
+    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
+    alone = lod.simplify_levels(mesh.vertices, mesh.faces, budgets)
+    spread = []
+    monkeypatch.setattr(lod, "spread", lambda parts: spread.append(len(parts)) or spare.spread(parts))
+    monkeypatch.setenv(spare.SHARE_VARIABLE, "2")
+    side_by_side = lod.simplify_levels(mesh.vertices, mesh.faces, budgets)
+    assert spread == [2]  # it did run side by side
+    counts = [len(r.faces) for r in alone]
+    assert counts[-1] == counts[-2] < len(mesh.faces)  # the coarsest level found nothing coarser
+    for a, b in zip(alone, side_by_side):
+        assert np.array_equal(a.faces, b.faces) and np.array_equal(a.vertices, b.vertices)
+        assert a.error_m == b.error_m and a.error_m <= max(budgets)
+
+
+def test_board_ceiling_waits_for_every_finer_level():
+    board = lod._Board(3, faces=1000)
+    assert board.ceiling(0) == 1000
+    assert board.ceiling(2) is None
+    board.publish(1, None, [300, 1200])  # the middle level ends first, with nothing
+    assert board.ceiling(2) is None
+    result = lod.Simplified(np.zeros((3, 3)), np.zeros((400, 3), dtype=np.int64), None, 0.0, 0, 0)
+    board.publish(0, result, [200, 400])
+    assert board.ceiling(1) == 400
+    assert board.ceiling(2) == 400
+    # a level whose search passed its ceiling on the way counts as nothing
+    board = lod._Board(3, faces=1000)
+    board.publish(0, result, [1000, 400])
+    assert board.ceiling(1) == 1000
+    assert lod._under_ceiling(result, [1000, 400], 1000) is None
+    assert lod._under_ceiling(result, [999, 400], 1000) is result

@@ -78,3 +78,19 @@ def test_package_is_the_same_written_side_by_side(monkeypatch, tmp_path):
     assert serial[2] == "checked"
     assert any(name.endswith(".dae") for name in serial[0])
     assert _files(tmp_path / "serial") == _files(tmp_path / "forked")
+
+
+def test_spread_runs_each_part_after_the_first_in_a_process_of_its_own(two_cores):
+    pids = spare.spread([os.getpid, os.getpid, os.getpid])
+    assert pids[0] == os.getpid()
+    assert len(set(pids)) == 3
+
+
+def test_spread_keeps_the_order_and_surfaces_a_part_error(two_cores):
+    assert spare.spread([lambda: 1, lambda: 2, lambda: 3]) == [1, 2, 3]
+
+    def refuse():
+        raise UserError("x.blend", "Cube", "bad mesh")
+
+    with pytest.raises(UserError, match="x.blend: Cube: bad mesh"):
+        spare.spread([lambda: 1, lambda: 2, refuse])
