@@ -67,18 +67,34 @@ def test_noop_edit_and_parameter_change(mini):
 
     nudge_stl(sources / "assets" / "kiosk" / "kiosk.stl")
     edit = explain(sources, out)
-    assert ran(edit) == {"geometry:kiosk", "asset:kiosk", "scene"}
+    assert ran(edit) == {"source:kiosk", "geometry:kiosk", "asset:kiosk", "scene"}
     stl = f"input {os.path.relpath(sources / 'assets/kiosk/kiosk.stl', out)}"
-    assert edit["geometry:kiosk"]["changed"] == [stl]
+    assert edit["source:kiosk"]["changed"] == [stl]
+    assert edit["geometry:kiosk"]["changed"] == ["dependency source:kiosk"]
     assert edit["asset:kiosk"]["changed"] == [stl, "dependency geometry:kiosk"]
     assert edit["scene"]["changed"] == ["dependency asset:kiosk"]
 
-    # a parameter edit in asset.toml reruns exactly what uses it
+    # a parameter edit in asset.toml reruns exactly what uses it: an LOD budget, the
+    # geometry and what follows, not the source read
     toml = sources / "assets" / "pole" / "asset.toml"
     toml.write_text(toml.read_text().replace("[0.004, 0.02]", "[0.004, 0.03]"))
     param = explain(sources, out)
     assert ran(param) == {"geometry:pole", "asset:pole", "scene"}
     assert param["geometry:pole"]["changed"] == ["parameters"]
+    assert param["source:pole"]["reason"] == "up to date"
+
+    # a reader's key (the source's up axis) reruns the read too; undone, the cache
+    # has every task of the chain as it was
+    before = toml.read_text()
+    toml.write_text('up_axis = "Y"\n' + before)
+    axis = explain(sources, out)
+    assert ran(axis) == {"source:pole", "geometry:pole", "asset:pole", "scene"}
+    assert axis["source:pole"]["changed"] == ["parameters"]
+    toml.write_text(before)
+    undone = explain(sources, out)
+    assert ran(undone) == set()
+    assert {undone[t]["reason"] for t in ("source:pole", "geometry:pole", "asset:pole", "scene")} == {
+        "restored from cache"}
 
     toml.write_text("mass_kg = 175.0\n" + toml.read_text())
     metadata = explain(sources, out)
@@ -133,7 +149,7 @@ def test_sample_one_asset_edit_reexports_only_its_chain(tmp_path):
     # A cache of its own: the shared one holds the edited asset once this test has run
     # in this checkout, and a restored task is not a run one.
     edit = explain(sources, out, "--cache", tmp_path / "edit-cache")
-    assert ran(edit) == {"geometry:junction_box", "asset:junction_box", "scene"}
+    assert ran(edit) == {"source:junction_box", "geometry:junction_box", "asset:junction_box", "scene"}
 
 
 def test_floorplan_memo_is_shared_by_the_planner_and_the_scene_tasks(tmp_path, monkeypatch):

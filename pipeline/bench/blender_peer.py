@@ -17,7 +17,7 @@ from .context import Context
 from .stats import summarize, summarize_values
 
 
-def _blender(*args: str, timeout: float = 1200.0) -> dict:
+def run_script(*args: str, timeout: float = 1200.0) -> dict:
     cmd = [sys.executable, "-m", "pipeline.bench.blender_script", *args]
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
@@ -34,7 +34,7 @@ def _loads(files: dict[str, Path], repeats: int) -> dict:
     runs: dict[str, list[dict]] = {k: [] for k in files}
     for _ in range(repeats):
         for label, path in files.items():
-            runs[label].append(_blender("load", str(path)))
+            runs[label].append(run_script("load", str(path)))
     out = {}
     for label, rs in runs.items():
         out[label] = {"file": str(files[label]), "time": summarize([r["seconds"] for r in rs]),
@@ -65,13 +65,13 @@ def blender_section(ctx: Context) -> dict:
         raise RuntimeError("no built sample (the build section failed)")
     work = ctx.work / "blender"
     repeats = 1  # a whole-scene export is minutes in Blender
-    a = _blender("assemble", str(built), str(work), str(repeats), timeout=ctx.pick(300.0, 600.0))
+    a = run_script("assemble", str(built), str(work), str(repeats), timeout=ctx.pick(300.0, 600.0))
     if "timeout_s" in a:
         raise RuntimeError(f"Blender's glTF export of the whole scene did not finish in {a['timeout_s']:.0f} s")
     # Blender's USD export of the sample took > 5 min and > 8 GB here: capped (the cap
     # includes opening the assembled .blend), and a timeout is recorded as the figure
     # it is; a higher cap only spends the bench's 20 minutes on a known answer
-    u = _blender("usd", a["blend"], str(work), timeout=ctx.pick(120.0, 150.0))
+    u = run_script("usd", a["blend"], str(work), timeout=ctx.pick(120.0, 150.0))
     ctx.shared["blender_glb"] = a["file"]
     ours = {p.suffix: p for p in sorted((built / "scene").iterdir()) if p.suffix in (".glb", ".usda")}
     files = {"empty (bpy baseline)": Path("none"), "blender_monolithic.glb": Path(a["file"])}
@@ -107,7 +107,7 @@ def reexport_section(ctx: Context, asset: str | None = None) -> dict:
     if asset is None:
         models = sorted(p.name for p in (built / "models").iterdir() if (p / f"{p.name}.glb").exists())
         asset = "shunt_reactor" if "shunt_reactor" in models else models[0]
-    r = _blender("reexport", str(built), asset, str(ctx.work / "reexport"), str(ctx.pick(3, 10)))
+    r = run_script("reexport", str(built), asset, str(ctx.work / "reexport"), str(ctx.pick(3, 10)))
     return {"asset": asset, "objects": r["objects"], "bytes": r["bytes"], "step": summarize(r["step_s"]),
             "what": "rotate the pointer, recolour its material, export_scene.gltf of the model (GLB); "
                     "Blender 5 has no COLLADA exporter, which the study used"}

@@ -6,6 +6,7 @@ Blender takes to load each result. Not imported by the pipeline; run as
     python -m pipeline.bench.blender_script usd BLEND OUTDIR
     python -m pipeline.bench.blender_script load FILE
     python -m pipeline.bench.blender_script reexport BUILT ASSET OUTDIR STEPS
+    python -m pipeline.bench.blender_script nudge BLEND STEP
 
 and prints one line `BENCH_JSON {...}`.
 
@@ -20,6 +21,8 @@ load: a fresh Blender imports FILE (glTF or USD, default options); seconds and t
 process's peak RSS (`load none` gives bpy's own baseline).
 reexport: the study's runtime: at every state step, change the indicator (the
 pointer's rotation and a material colour) and re-export the model with Blender.
+nudge: a modeller's edit of a source, for the build bench: open BLEND, move one
+vertex of its largest mesh STEP metres along X, save it in place (no .blend1).
 """
 
 from __future__ import annotations
@@ -156,6 +159,20 @@ def reexport(built: Path, asset: str, outdir: Path, steps: int) -> dict:
     return {"asset": asset, "objects": len(objs), "step_s": times, "bytes": dst.stat().st_size}
 
 
+def nudge(blend: Path, step: float) -> dict:
+    import bpy
+
+    bpy.ops.wm.open_mainfile(filepath=str(blend), load_ui=False, use_scripts=False)
+    meshes = sorted((o for o in bpy.data.objects if o.type == "MESH" and len(o.data.vertices)), key=lambda o: o.name)
+    if not meshes:
+        raise SystemExit(f"{blend}: no mesh to edit")
+    target = max(meshes, key=lambda o: len(o.data.vertices))
+    target.data.vertices[0].co.x += step
+    bpy.context.preferences.filepaths.save_version = 0
+    bpy.ops.wm.save_mainfile(filepath=str(blend))
+    return {"object": target.name, "step_m": step}
+
+
 if __name__ == "__main__":
     mode, *args = sys.argv[1:]
     if mode == "assemble":
@@ -166,5 +183,7 @@ if __name__ == "__main__":
         _emit(load(args[0]))
     elif mode == "reexport":
         _emit(reexport(Path(args[0]), args[1], Path(args[2]), int(args[3])))
+    elif mode == "nudge":
+        _emit(nudge(Path(args[0]), float(args[1])))
     else:
         sys.exit(f"unknown mode {mode!r}")

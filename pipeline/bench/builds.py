@@ -6,12 +6,13 @@ sampled peak of the whole tree's RSS):
   (one worker, single-threaded) against two (two workers; a task running alone gets
   both cores);
 - no-op rebuild (nothing changed), from the CLI and in-process;
-- one-asset edits, two kinds: the asset.toml `description` of one asset rewritten
-  (metadata: its package task and the scene rerun, its geometry task does not), and
-  its coarsest LOD budget nudged by 0.01 % (geometry: read, LOD search, package and
-  scene all rerun; what a modeller's commit of a new source costs in CI), the
-  geometry edit also once for every asset in turn (how the figure spreads with the
-  size of the edited asset's own chain);
+- one-asset edits, three kinds: the asset.toml `description` of one asset rewritten
+  (metadata: its package task and the scene rerun, its geometry task does not); its
+  coarsest LOD budget nudged by 0.01 % (geometry: LOD search, package and scene
+  rerun, the source is not read again); one vertex of its source file moved by
+  0.1 mm (source: the whole chain, read included; what a modeller's commit of a new
+  source costs in CI). The geometry edit also once for every asset in turn (how the
+  figure spreads with the size of the edited asset's own chain);
 - placements: the plan repeated 1x, 2x, 5x, 10x on new platforms, built in the same
   build folder as the sample so the asset packages come from the cache and only the
   terrain and scene work grows;
@@ -138,7 +139,7 @@ _BUDGETS = re.compile(r"^(budgets_m\s*=\s*\[)([^\]]*)(\])", re.M)
 
 def nudge_lod_budget(asset_toml: Path, factor: float) -> None:
     """Scale the coarsest LOD budget of an asset.toml: a geometry parameter edit that
-    reruns the asset's whole chain and leaves its result about the same."""
+    reruns the asset's geometry and package and leaves its result about the same."""
     src = asset_toml.read_text()
     m = _BUDGETS.search(src)
     if m is None:
@@ -148,32 +149,63 @@ def nudge_lod_budget(asset_toml: Path, factor: float) -> None:
     asset_toml.write_text(src[:m.start()] + m.group(1) + ", ".join(repr(v) for v in values) + m.group(3) + src[m.end():])
 
 
+def nudge_source(path: Path, step_m: float) -> None:
+    """Move one vertex of an asset's source file `step_m` metres along X: a .blend
+    through Blender (pipeline.bench.blender_script), a mesh file through trimesh."""
+    suffix = path.suffix.lower()
+    if suffix == ".blend":
+        from .blender_peer import run_script
+
+        run_script("nudge", str(path), repr(step_m), timeout=300.0)
+    elif suffix in (".stl", ".obj", ".ply"):
+        import trimesh
+
+        mesh = trimesh.load(path, force="mesh", process=False)
+        vertices = np.array(mesh.vertices)
+        vertices[0, 0] += step_m
+        trimesh.Trimesh(vertices, mesh.faces, process=False).export(path)
+    else:
+        raise BuildFailed(f"{path}: no source edit for {suffix} files")
+
+
+# per kind of edit: the task it must rerun, and what it changes
+EDITS = {"metadata": ("asset", "asset.toml: description rewritten"),
+         "geometry": ("geometry", "asset.toml: coarsest LOD budget x (1 + 1e-4 i)"),
+         "source": ("source", "source file: one vertex moved by 0.1 mm i")}
+
+
 def one_asset_edit(ctx: Context, sources: Path, built: Path, min_r: int, max_r: int, budget: float,
                    kind: str = "metadata") -> dict:
+    from .. import config
+
     asset = pick_edit_asset(built)
     toml = sources / "assets" / asset / "asset.toml"
-    original = toml.read_text()
+    edited_file = config.load_asset_config(toml).source if kind == "source" else toml
+    original = edited_file.read_bytes()
+    task, what = EDITS[kind]
     runs = []
 
     def once(i: int):
         if kind == "metadata":
             edit_description(toml, f"bench edit {i}: description changed, geometry untouched")
-        else:
+        elif kind == "geometry":
             nudge_lod_budget(toml, 1.0 + 1e-4 * (i + 1))
+        else:
+            edited_file.write_bytes(original)
+            nudge_source(edited_file, 1e-4 * (i + 1))
         r = run_build(ctx, sources, built, 2, f"edit_{kind}_{i}")
-        edited = f"{'asset' if kind == 'metadata' else 'geometry'}:{asset}"
-        if edited not in r["ran"]:  # the edit changed nothing: the figure would be a no-op's
-            raise BuildFailed(f"editing {toml} did not rerun {edited}")
+        if f"{task}:{asset}" not in r["ran"]:  # the edit changed nothing: the figure would be a no-op's
+            raise BuildFailed(f"editing {edited_file} did not rerun {task}:{asset}")
         runs.append(r)
         return r["seconds"]
 
     try:
         repeat(once, min_r, max_r, budget)
     finally:  # back to the sources as they were: later sections use this build
-        toml.write_text(original)
+        edited_file.write_bytes(original)
     run_build(ctx, sources, built, 2, f"edit_{kind}_restore")
-    what = "description rewritten" if kind == "metadata" else "coarsest LOD budget x (1 + 1e-4 i)"
-    return {**_series(runs), "asset": asset, "kind": kind, "edit": f"assets/{asset}/asset.toml: {what}"}
+    return {**_series(runs), "asset": asset, "kind": kind,
+            "edit": f"assets/{asset}/{edited_file.name}: {what.split(': ', 1)[1]}"}
 
 
 def every_asset_geometry_edit(ctx: Context, sources: Path, built: Path, cold_s: float) -> dict:
@@ -251,6 +283,7 @@ def large_plan(ctx: Context, sources: Path, multiple: int, min_r: int, max_r: in
     data["noop"] = noop(ctx, variant, built, ctx.pick(2, 3))
     data["one_asset_edit"] = one_asset_edit(ctx, variant, built, min_r, max_r, budget)
     data["one_asset_geometry_edit"] = one_asset_edit(ctx, variant, built, min_r, max_r, budget, kind="geometry")
+    data["one_asset_source_edit"] = one_asset_edit(ctx, variant, built, min_r, max_r, budget, kind="source")
     from .. import config
     from ..ingest.floorplan import read_floorplan
 
@@ -286,6 +319,8 @@ def build_section(ctx: Context) -> dict:
     data["one_asset_edit"] = one_asset_edit(ctx, sources, built, 1, ctx.pick(1, 3), ctx.pick(0.0, 45.0))
     data["one_asset_geometry_edit"] = one_asset_edit(ctx, sources, built, 1, ctx.pick(1, 3), ctx.pick(0.0, 45.0),
                                                      kind="geometry")
+    data["one_asset_source_edit"] = one_asset_edit(ctx, sources, built, 1, ctx.pick(1, 3), ctx.pick(0.0, 45.0),
+                                                   kind="source")
     data["every_asset_geometry_edit"] = every_asset_geometry_edit(ctx, sources, built, data["cold_j2"]["time"]["median_s"])
     multiples = ctx.pick([1, 2], [1, 2, 5, 10])
     data["placements"] = placements(ctx, sources, built, multiples, ctx.pick(1, 3), ctx.pick(0.0, 60.0))
@@ -312,6 +347,7 @@ def targets(d: dict) -> list[dict]:
     noop_s = d["noop"]["time"]["median_s"]
     edit_s = d["one_asset_edit"]["time"]["median_s"]
     geometry_edit_s = d["one_asset_geometry_edit"]["time"]["median_s"]
+    source_edit_s = d["one_asset_source_edit"]["time"]["median_s"]
     each = d["every_asset_geometry_edit"]["of_cold"]
     pl = d["placements"]
     top = str(max(int(k) for k in pl))
@@ -321,10 +357,12 @@ def targets(d: dict) -> list[dict]:
         ("no-op rebuild under 1 % of cold", noop_s / cold2, 0.01, "ratio"),
         ("no-op rebuild under 1 s", noop_s, 1.0, "s"),
         ("one-asset edit (asset.toml metadata) under 10 % of cold", edit_s / cold2, 0.10, "ratio"),
-        (f"one-asset edit (geometry: whole chain, {d['one_asset_geometry_edit']['asset']}) under 10 % of cold",
+        (f"one-asset edit (LOD budget, {d['one_asset_geometry_edit']['asset']}) under 10 % of cold",
          geometry_edit_s / cold2, 0.10, "ratio"),
-        (f"one-asset edit (geometry), median of the {each['count']} assets, under 10 % of cold",
+        (f"one-asset edit (LOD budget), median of the {each['count']} assets, under 10 % of cold",
          each["median"], 0.10, "ratio"),
+        (f"one-asset edit (source file: whole chain, {d['one_asset_source_edit']['asset']}) under 10 % of cold",
+         source_edit_s / cold2, 0.10, "ratio"),
         ("2 workers at most 0.6x the 1-worker time", cold2 / cold1, 0.6, "ratio"),
         (f"{top}x placements, assets cached: terrain and scene rebuild at most 1.5x cold",
          pl[top]["time"]["median_s"] / cold2, 1.5, "ratio"),
@@ -346,8 +384,10 @@ def _large_plan_rows(large: dict, sample_cold: float) -> list[tuple]:
         (f"{m}: no-op rebuild under 1 s", noop_s, 1.0, "s"),
         (f"{m}: one-asset edit (metadata) under 10 % of its cold build",
          large["one_asset_edit"]["time"]["median_s"] / cold2, 0.10, "ratio"),
-        (f"{m}: one-asset edit (geometry: whole chain) under 10 % of its cold build",
+        (f"{m}: one-asset edit (LOD budget) under 10 % of its cold build",
          large["one_asset_geometry_edit"]["time"]["median_s"] / cold2, 0.10, "ratio"),
+        (f"{m}: one-asset edit (source file: whole chain) under 10 % of its cold build",
+         large["one_asset_source_edit"]["time"]["median_s"] / cold2, 0.10, "ratio"),
     ]
     if large.get("cold_j1"):
         rows.append((f"{m}: 2 workers at most 0.6x the 1-worker time",
@@ -361,8 +401,10 @@ def _all_series(d: dict):
     yield d["noop"]
     yield d["one_asset_edit"]
     yield d["one_asset_geometry_edit"]
+    yield d["one_asset_source_edit"]
     yield d["every_asset_geometry_edit"]
     yield from d["placements"].values()
     yield from d["unique_assets"].values()
     large = d["large_plan"]
-    yield from (large[k] for k in ("cold_j2", "cold_j1", "noop", "one_asset_edit", "one_asset_geometry_edit") if large[k])
+    yield from (large[k] for k in ("cold_j2", "cold_j1", "noop", "one_asset_edit", "one_asset_geometry_edit",
+                                           "one_asset_source_edit") if large[k])

@@ -1,4 +1,5 @@
-"""ir.Asset on disk: what the geometry task hands to the package task.
+"""ir.Asset on disk: what the source task hands to the geometry task, and the geometry
+task to the package task.
 
 One file: MAGIC, the header's length (uint64, little-endian), a JSON header, then the
 arrays' raw bytes, each at an 8-aligned offset the header gives. The header is the

@@ -18,7 +18,7 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     console = Console(file=sys.stderr, quiet=quiet)
-    stages = sorted({t.stage for t in p.tasks}, key=["geometry", "assets", "terrain", "scene"].index)
+    stages = sorted({t.stage for t in p.tasks}, key=["sources", "geometry", "assets", "terrain", "scene"].index)
     with Progress(TextColumn("{task.description:<8}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as progress:
         bars = {s: progress.add_task(s, total=sum(t.stage == s for t in p.tasks)) for s in stages}

@@ -1,18 +1,22 @@
-"""The build's tasks: per used asset a geometry task and a package task, the terrain,
-the scene.
+"""The build's tasks: per used asset a source, a geometry and a package task, the
+terrain, the scene.
 
 `plan()` reads the sources and returns the task graph; the actions below run in
 worker processes and write into the staging folder they are given (paths relative
-to build/). An asset's chain is two tasks:
+to build/). An asset's chain is three tasks:
 
-- `geometry:<id>`: read the source, clean, collision, LOD chain -> .ir/<id>/<id>.ir
-  (irfile). The slow part (Blender, the LOD search). Its parameters are the keys of
-  asset.toml that shape geometry; the metadata keys below are not among them.
+- `source:<id>`: read the source file and clean it -> .source/<id>/<id>.ir (irfile),
+  with the findings on the file as authored. The only task that reads a .blend (so
+  the only one whose worker needs Blender). Its parameters are the asset.toml keys
+  the readers use: none of the metadata, LOD or collision keys below.
+- `geometry:<id>`: the cleaned source -> collision, LOD chain -> .ir/<id>/<id>.ir.
+  The slow part (the LOD search). Its parameters are the [lod] and [collision] keys.
 - `asset:<id>`: the .ir file and asset.toml's metadata -> the package in every format,
   the manifest and the findings.
 
 So editing an asset's description, category, mass or triangle budget rewrites its
-package and leaves its geometry alone; editing its source or an LOD budget reruns both.
+package and leaves its geometry alone; editing an LOD budget reruns the last two and
+reads no source; editing the source reruns all three.
 """
 
 from __future__ import annotations
@@ -28,8 +32,11 @@ from ..errors import UserError
 from .graph import Task, code_version
 from ..spare import beside
 
-GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
-                 "pipeline.ingest.mesh", "pipeline.geometry", "pipeline.validate.checks",
+SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
+               "pipeline.ingest.mesh", "pipeline.geometry.clean", "pipeline.geometry.metrics",
+               "pipeline.geometry.transform", "pipeline.validate.checks", "pipeline.spare",
+               "pipeline.builder.irfile", "pipeline.builder.tasks")
+GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.validate.checks", "pipeline.spare",
                  "pipeline.builder.irfile", "pipeline.builder.tasks")
 PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.digest", "pipeline.validate.checks",
                 "pipeline.builder.irfile", "pipeline.builder.tasks")
@@ -37,6 +44,9 @@ SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pi
               "pipeline.scene", "pipeline.export", "pipeline.digest", "pipeline.geometry.transform")
 # asset.toml keys only the package task reads (the readers get neutral values for them)
 METADATA_KEYS = ("description", "category", "mass_kg", "triangle_budget")
+# asset.toml tables only the geometry task reads
+GEOMETRY_KEYS = ("lod", "collision")
+SOURCE_FOLDER = ".source"
 IR_FOLDER = ".ir"
 
 
@@ -57,16 +67,19 @@ def read_source(cfg: config.AssetConfig) -> ir.Asset:
 
 
 def asset_steps(cfg: config.AssetConfig) -> list[tuple[str, object]]:
-    """The processing pipeline of one asset: named Asset -> Asset steps, in order."""
-    from ..geometry.clean import CleanOptions, clean
+    """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order."""
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain
 
     return [
-        ("clean", clean(CleanOptions())),
         ("collision", collision_step(CollisionOptions(mode=cfg.collision_mode))),
         ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m))),
     ]
+
+
+def source_path(asset_id: str) -> str:
+    """Where an asset's source task leaves the cleaned source, relative to build/."""
+    return f"{SOURCE_FOLDER}/{asset_id}/{asset_id}.ir"
 
 
 def ir_path(asset_id: str) -> str:
@@ -74,42 +87,68 @@ def ir_path(asset_id: str) -> str:
     return f"{IR_FOLDER}/{asset_id}/{asset_id}.ir"
 
 
+def source_params(cfg: config.AssetConfig) -> dict:
+    """The asset.toml keys the source readers use."""
+    return {k: v for k, v in sorted(cfg.params.items()) if k not in METADATA_KEYS + GEOMETRY_KEYS}
+
+
 def geometry_params(cfg: config.AssetConfig) -> dict:
-    """The asset.toml keys that shape the geometry task's result."""
-    return {k: v for k, v in sorted(cfg.params.items()) if k not in METADATA_KEYS}
+    """The asset.toml settings the geometry steps use (defaults filled in)."""
+    return {"collision_mode": cfg.collision_mode, "lod_budgets_m": list(cfg.lod_budgets_m)}
 
 
-def _geometry_config(cfg: config.AssetConfig) -> config.AssetConfig:
-    """cfg with neutral metadata, so the geometry task depends on its parameters alone
-    (a mass of 1 kg: the package task scales the links' shares to asset.toml's mass)."""
-    return dataclasses.replace(cfg, description="", category="", mass_kg=1.0, triangle_budget=0)
+def _source_config(cfg: config.AssetConfig) -> config.AssetConfig:
+    """cfg with neutral metadata and geometry settings, so the source task depends on
+    its parameters alone (a mass of 1 kg: the package task scales the links' shares
+    to asset.toml's mass)."""
+    return dataclasses.replace(cfg, description="", category="", mass_kg=1.0, triangle_budget=0,
+                               lod_budgets_m=(), collision_mode="")
 
 
-def build_geometry(staging: Path, asset_toml: str) -> dict:
-    """Task action: one asset's source read and processed, written as an .ir file."""
+def build_source(staging: Path, asset_toml: str) -> dict:
+    """Task action: one asset's source file read and cleaned, written as an .ir file
+    with the findings on the file as authored."""
+    from ..geometry.clean import CleanOptions, clean
     from ..validate.checks import as_dicts, check_asset
     from . import irfile
 
     timings = {}
     t = time.perf_counter()
-    cfg = _geometry_config(config.load_asset_config(Path(asset_toml)))
+    cfg = _source_config(config.load_asset_config(Path(asset_toml)))
     source = read_source(cfg)
     timings["read"] = time.perf_counter() - t
 
-    def process():
-        asset = source
-        for name, step in asset_steps(cfg):
-            t = time.perf_counter()
-            asset = step(asset)
-            timings[name] = time.perf_counter() - t
+    def cleaned():
+        t = time.perf_counter()
+        asset = clean(CleanOptions())(source)
+        timings["clean"] = time.perf_counter() - t
         return asset
 
-    # the modeller's file as authored (the triangle budget is the package task's)
-    asset, source_findings = beside(process, lambda: check_asset(source))
-    source_triangles = source.triangle_count(0)
+    # the modeller's file as authored, checked beside the clean-up (the triangle
+    # budget is the package task's)
+    asset, source_findings = beside(cleaned, lambda: check_asset(source))
+    out = Path(staging) / source_path(cfg.id)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    irfile.write(out, asset, {"source_findings": as_dicts(source_findings),
+                              "source_triangles": source.triangle_count(0)})
+    return {"asset": cfg.id, "timings": timings}
+
+
+def build_geometry(staging: Path, asset_toml: str, build: str) -> dict:
+    """Task action: one asset's cleaned source through the geometry steps, written as
+    an .ir file (the source task's findings carried along)."""
+    from . import irfile
+
+    cfg = config.load_asset_config(Path(asset_toml))
+    asset, extra = irfile.read(Path(build) / source_path(cfg.id))
+    timings = {}
+    for name, step in asset_steps(cfg):
+        t = time.perf_counter()
+        asset = step(asset)
+        timings[name] = time.perf_counter() - t
     out = Path(staging) / ir_path(cfg.id)
     out.parent.mkdir(parents=True, exist_ok=True)
-    irfile.write(out, asset, {"source_findings": as_dicts(source_findings), "source_triangles": source_triangles})
+    irfile.write(out, asset, extra)
     return {"asset": cfg.id, "timings": timings}
 
 
@@ -200,23 +239,36 @@ def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
             if a not in p.assets:
                 raise UserError(Path(sources) / "assets", a, "no such asset")
         wanted = sorted(only)
+    source_code = code_version(*SOURCE_CODE)
     geometry_code, package_code = code_version(*GEOMETRY_CODE), code_version(*PACKAGE_CODE)
     for asset_id in wanted:
         cfg = p.assets[asset_id]
         source, toml = cfg.source.resolve(), cfg.path.resolve()
+        # the LOD search dominates a chain and grows with the mesh: the modeller's
+        # budget is the one size known before reading the source
+        cost = float(cfg.triangle_budget)
+        p.tasks.append(Task(
+            name=f"source:{asset_id}",
+            stage="sources",
+            action=build_source,
+            args={"asset_toml": str(toml)},
+            inputs=(source,),
+            params={"asset": asset_id, "asset.toml": source_params(cfg)},
+            code=source_code,
+            outputs=(f"{SOURCE_FOLDER}/{asset_id}/",),
+            needs_blender=source.suffix.lower() == ".blend",
+            cost=cost,  # its chain's: the longest chains start first
+        ))
         p.tasks.append(Task(
             name=f"geometry:{asset_id}",
             stage="geometry",
             action=build_geometry,
-            args={"asset_toml": str(toml)},
-            inputs=(source,),
+            args={"asset_toml": str(toml), "build": str(Path(build).resolve())},
+            deps=(f"source:{asset_id}",),
             params={"asset": asset_id, "asset.toml": geometry_params(cfg)},
             code=geometry_code,
             outputs=(f"{IR_FOLDER}/{asset_id}/",),
-            needs_blender=source.suffix.lower() == ".blend",
-            # the LOD search dominates and grows with the mesh: the modeller's budget
-            # is the one size known before reading the source
-            cost=float(cfg.triangle_budget),
+            cost=cost,
         ))
         p.tasks.append(Task(
             name=f"asset:{asset_id}",
