@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import trimesh
 
 import mini_sources
+from pipeline.bench.builds import nudge_source
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -41,14 +41,6 @@ def tree_hashes(out: Path) -> dict[str, str]:
             for p in sorted(out.rglob("*")) if p.is_file() and not p.relative_to(out).parts[0].startswith(".")}
 
 
-def nudge_stl(path: Path) -> None:
-    """Move one vertex of a mesh source by 5 mm: a real edit of one asset."""
-    mesh = trimesh.load(path, force="mesh", process=False)
-    v = np.array(mesh.vertices)
-    v[0] += (0.005, 0.0, 0.0)
-    trimesh.Trimesh(v, mesh.faces, process=False).export(path)
-
-
 @pytest.fixture(scope="module")
 def mini(tmp_path_factory):
     root = tmp_path_factory.mktemp("incr")
@@ -65,7 +57,7 @@ def test_noop_edit_and_parameter_change(mini):
 
     assert ran(explain(sources, out)) == set()  # no-op
 
-    nudge_stl(sources / "assets" / "kiosk" / "kiosk.stl")
+    nudge_source(sources / "assets" / "kiosk" / "kiosk.stl", 0.005)  # a real edit of one asset
     edit = explain(sources, out)
     assert ran(edit) == {"source:kiosk", "geometry:kiosk", "asset:kiosk", "scene"}
     stl = f"input {os.path.relpath(sources / 'assets/kiosk/kiosk.stl', out)}"
@@ -145,7 +137,7 @@ def test_sample_one_asset_edit_reexports_only_its_chain(tmp_path):
     out = tmp_path / "build"
     cache = ROOT / "build" / ".cache" if (ROOT / "build" / ".cache").is_dir() else tmp_path / "cache"
     explain(sources, out, "--cache", cache)
-    nudge_stl(sources / "assets" / "junction_box" / "junction_box.stl")
+    nudge_source(sources / "assets" / "junction_box" / "junction_box.stl", 0.005)
     # A cache of its own: the shared one holds the edited asset once this test has run
     # in this checkout, and a restored task is not a run one.
     edit = explain(sources, out, "--cache", tmp_path / "edit-cache")

@@ -168,10 +168,10 @@ def nudge_source(path: Path, step_m: float) -> None:
         raise BuildFailed(f"{path}: no source edit for {suffix} files")
 
 
-# per kind of edit: the task it must rerun, and what it changes
-EDITS = {"metadata": ("asset", "asset.toml: description rewritten"),
-         "geometry": ("geometry", "asset.toml: coarsest LOD budget x (1 + 1e-4 i)"),
-         "source": ("source", "source file: one vertex moved by 0.1 mm i")}
+# per kind of edit: the task it must rerun, and what it changes in the edited file
+EDITS = {"metadata": ("asset", "description rewritten"),
+         "geometry": ("geometry", "coarsest LOD budget x (1 + 1e-4 i)"),
+         "source": ("source", "one vertex moved by 0.1 mm i")}
 
 
 def one_asset_edit(ctx: Context, sources: Path, built: Path, min_r: int, max_r: int, budget: float,
@@ -205,7 +205,7 @@ def one_asset_edit(ctx: Context, sources: Path, built: Path, min_r: int, max_r: 
         edited_file.write_bytes(original)
     run_build(ctx, sources, built, 2, f"edit_{kind}_restore")
     return {**_series(runs), "asset": asset, "kind": kind,
-            "edit": f"assets/{asset}/{edited_file.name}: {what.split(': ', 1)[1]}"}
+            "edit": f"assets/{asset}/{edited_file.name}: {what}"}
 
 
 def every_asset_geometry_edit(ctx: Context, sources: Path, built: Path, cold_s: float) -> dict:

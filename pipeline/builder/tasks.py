@@ -33,8 +33,7 @@ from .graph import Task, code_version
 from ..spare import beside
 
 SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
-               "pipeline.ingest.mesh", "pipeline.geometry.clean", "pipeline.geometry.metrics",
-               "pipeline.geometry.transform", "pipeline.validate.checks", "pipeline.spare",
+               "pipeline.ingest.mesh", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.spare",
                "pipeline.builder.irfile", "pipeline.builder.tasks")
 GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.validate.checks", "pipeline.spare",
                  "pipeline.builder.irfile", "pipeline.builder.tasks")

@@ -474,9 +474,17 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
     return None, rounds
 
 
+def _beats(found: int | None, top: int, ceiling: int) -> bool:
+    """Whether a search that found `found` faces (None: nothing), its largest round
+    having `top`, gives a level under `ceiling`: the one rule of `_search_levels`
+    and the board (a round at or over the ceiling would have ended the search)."""
+    return found is not None and top < ceiling and found < ceiling
+
+
 def _under_ceiling(best: Simplified | None, rounds: list[int], ceiling: int) -> Simplified | None:
     """A search's result as `ceiling` would have cut it short (see _search_meshopt)."""
-    return None if any(count >= ceiling for count in rounds) else best
+    found = None if best is None else len(best.faces)
+    return best if _beats(found, max(rounds, default=0), ceiling) else None
 
 
 def _search_levels(judge: _Judge, budgets, iterations: int, faces: int) -> list[Simplified | None]:
@@ -486,33 +494,28 @@ def _search_levels(judge: _Judge, budgets, iterations: int, faces: int) -> list[
     side, each learning its ceiling from the board as soon as the finer levels are
     done, and the ceilings applied again after. The results are the same."""
     searched = [i for i, b in enumerate(budgets) if b > 0]
-    outcomes: dict[int, tuple[Simplified | None, list[int]]] = {}
+    outcomes: dict[int, tuple[Simplified | None, list[int]]] = {i: (None, []) for i, b in enumerate(budgets) if b <= 0}
     if len(searched) > 1 and cores_to_spare():
         board = _Board(len(budgets), faces)
+        for i, outcome in outcomes.items():
+            board.publish(i, *outcome)  # no budget, no search: it passes its ceiling on
 
         def search(i: int):
             outcome = _search_meshopt(judge, budgets[i], iterations, lambda: board.ceiling(i))
             board.publish(i, *outcome)
             return outcome
 
-        for i in sorted(set(range(len(budgets))) - set(searched)):
-            board.publish(i, None, [])  # no budget, no search: it passes its ceiling on
         # the finest level here, the coarser ones one after the other in a child: a
         # coarser level that cannot beat a finer one learns so at the finer one's end
         rest = searched[1:]
         first, others = spread([lambda: search(searched[0]), lambda: [search(i) for i in rest]])
-        outcomes = dict(zip(searched, [first, *others]))
+        outcomes.update(zip(searched, [first, *others]))
     out, ceiling = [], faces
     for i, budget in enumerate(budgets):
-        best = None
-        if i in outcomes:
-            best = _under_ceiling(*outcomes[i], ceiling)
-        elif budget > 0:
-            best = _search_meshopt(judge, budget, iterations, lambda: ceiling)[0]
-        if best is not None and len(best.faces) < ceiling:
+        outcome = outcomes[i] if i in outcomes else _search_meshopt(judge, budget, iterations, lambda: ceiling)
+        best = _under_ceiling(*outcome, ceiling)
+        if best is not None:
             ceiling = len(best.faces)
-        else:
-            best = None
         out.append(best)
     return out
 
@@ -544,9 +547,9 @@ class _Board:
         for word in self.table[:level].tolist():
             if word == self.UNFINISHED:
                 return None
-            top, found = word >> 32, word & 0xFFFFFFFF
-            if found and top < ceiling and found - 1 < ceiling:
-                ceiling = found - 1
+            top, found = word >> 32, (word & 0xFFFFFFFF) - 1
+            if _beats(found if found >= 0 else None, top, ceiling):
+                ceiling = found
         return ceiling
 
 
