@@ -181,3 +181,26 @@ def test_surface_distance_exact_beside_crowding_parts():
                     for t in tris], axis=0)
     np.testing.assert_allclose(sd(p), brute, atol=1e-12)
     assert sd.max_distance(p) == pytest.approx(brute.max(), abs=1e-12)
+
+
+def test_surface_distance_exact_where_it_decides_on_slivers():
+    # two side faces of the sample's rigid busbar tube between its end rings, 3.7 m
+    # long and 9.8 mm wide: fcpw's float32 arithmetic picks the farther one for this
+    # point, and the distance that decides must still be exact
+    v = np.array([[-5.800000195022013, 0.01950903236865997, -0.09807827303043212],
+                  [-2.0850000424341215, 0.01950903236865997, -0.09807843541824586],
+                  [-2.0850000424970636, 0.00980171468108892, -0.09951837932789094],
+                  [-5.800000195084955, 0.00980171468108892, -0.0995182169400772]])
+    f = np.array([[0, 1, 2], [0, 2, 3]])
+    p = np.array([[-4.617111412737789, 0.01698018142268529, -0.09758916737500006],
+                  [-4.0, 0.5, 0.5]])  # far away: the maximum
+    exact = np.min([np.linalg.norm(p - trimesh.triangles.closest_point(np.repeat(v[t][None], len(p), 0), p), axis=1)
+                    for t in f], axis=0)
+    sd = metrics.SurfaceDistance(v, f, np.zeros(3))
+    rough, face = sd.nearest(p, exact_above=np.inf)  # only the maximum measured again
+    assert rough[1] == pytest.approx(exact[1], abs=1e-12)
+    assert rough[0] > exact[0] + 1e-4 and face[0] == 1  # the farther sliver, measured exactly
+    decided, face = sd.nearest(p, exact_above=0.5e-3)  # over half a millimetre decides
+    np.testing.assert_allclose(decided, exact, atol=1e-12)
+    assert face[0] == 0
+    np.testing.assert_allclose(sd(p), exact, atol=1e-12)  # the default: every distance exact

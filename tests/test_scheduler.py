@@ -179,3 +179,24 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
     init_worker(3, blender=False)
     assert (os.environ["IGL_NUM_THREADS"], os.environ["OMP_NUM_THREADS"], os.environ["OPENBLAS_NUM_THREADS"],
             os.environ[SHARE_VARIABLE]) == ("3", "3", "1", "3")
+
+
+def _affinity() -> list[int]:
+    return sorted(os.sched_getaffinity(0))
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="needs two usable CPUs")
+def test_build_given_fewer_cores_holds_its_workers_to_them(tmp_path):
+    """fcpw starts a thread per core it sees: `--jobs 1` must still be one core."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from pipeline.builder.scheduler import Scheduler, init_worker
+
+    usable = _affinity()
+    assert Scheduler(tmp_path / "b", jobs=1)._cpus() == (usable[0],)
+    assert Scheduler(tmp_path / "b", jobs=len(usable))._cpus() == ()  # the whole machine: no affinity
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=init_worker,
+                             initargs=(1, False, (usable[0],))) as pool:
+        assert pool.submit(_affinity).result() == [usable[0]]

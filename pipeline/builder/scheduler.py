@@ -74,15 +74,19 @@ class BuildLock:
         os.close(self.fd)
 
 
-# thread pools of the native libraries a task uses (libigl's distance queries above all)
+# thread pools of the native libraries a task uses that a variable sizes (libigl's)
 THREAD_VARIABLES = ("IGL_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
 
-def init_worker(threads: int, blender: bool) -> None:
+def init_worker(threads: int, blender: bool, cpus: tuple[int, ...] = ()) -> None:
     """Worker initializer. Each worker's native thread pools get its share of the cores
     (N workers each running as many threads as there are cores only trade places);
-    a variable the user set is kept. A worker that will read .blend files pays bpy's
-    import once, not once per task."""
+    a variable the user set is kept. `cpus`: the CPUs a build given fewer cores than
+    the machine is held to (fcpw starts a thread per core it sees, whatever the
+    variables say). A worker that will read .blend files pays bpy's import once, not
+    once per task."""
+    if cpus:
+        os.sched_setaffinity(0, cpus)
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, str(threads))
     os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (spare.beside)
@@ -184,6 +188,14 @@ class Scheduler:
         width = sum(1 for t in stale if not names.intersection(t.deps))
         return max(1, self.cores // max(1, min(self.jobs, width))), any(t.needs_blender for t in stale)
 
+    def _cpus(self) -> tuple[int, ...]:
+        """The CPUs the workers are held to: the first `cores` this process may use
+        when that is fewer than all of them, else none (no affinity set)."""
+        if not hasattr(os, "sched_getaffinity"):
+            return ()
+        usable = sorted(os.sched_getaffinity(0))
+        return tuple(usable[:self.cores]) if self.cores < len(usable) else ()
+
     # --- run --------------------------------------------------------------------
     def run(self, tasks: list[Task], stop_on_error: bool = True) -> BuildReport:
         order = check_graph(tasks)
@@ -232,7 +244,7 @@ class Scheduler:
                             ctx = multiprocessing.get_context("spawn")
                             threads, needs_bpy = self._worker_setup(order, state, hasher)
                             pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=init_worker,
-                                                       initargs=(threads, needs_bpy))
+                                                       initargs=(threads, needs_bpy, self._cpus()))
                         staging = self.build / ".staging" / task.key
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)

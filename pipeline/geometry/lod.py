@@ -329,7 +329,9 @@ class _Judge:
             skip = np.zeros(len(self.queries), dtype=bool)
         index = np.nonzero(~skip)[0]
         target = SurfaceDistance(v, f, self.reference.origin)
-        d_back = self.reference(own)
+        # exact where a distance decides: a miss (over the threshold) or over the budget
+        decides = min(threshold, tolerance) if threshold is not None else tolerance
+        d_back = self.reference(own, decides)
         back = float(d_back.max(initial=0.0))
         # Points whose bound (an earlier exact distance to a face this candidate still
         # has) is under the threshold can neither miss nor be the maximum of a failing
@@ -340,13 +342,13 @@ class _Judge:
             near[near] = np.isin(self.bound_key[index[near]], cand_keys)
             bounded = near
         d_there = np.zeros(len(index))
-        d_there[~bounded] = self._distances(target, index[~bounded], cand_keys)
+        d_there[~bounded] = self._distances(target, index[~bounded], cand_keys, decides)
         there = float(d_there.max(initial=0.0))
         if topo is None:
             topo = _topology_faces(v, f)
         added = _clean.non_manifold_edge_count(topo) - self.non_manifold
         if bounded.any() and there <= threshold and back <= tolerance and flips == 0 and added <= 0:
-            d_there[bounded] = self._distances(target, index[bounded], cand_keys)
+            d_there[bounded] = self._distances(target, index[bounded], cand_keys, decides)
             there = float(d_there.max(initial=0.0))
         else:
             d_there[bounded] = self.bound[index[bounded]]  # upper bounds, all <= threshold
@@ -364,10 +366,12 @@ class _Judge:
         self.how_far = np.concatenate(how_far) if how_far else np.zeros(0)
         return Simplified(v, f, kept, max(there, back), flips, added), where
 
-    def _distances(self, target: SurfaceDistance, index: np.ndarray, cand_keys: np.ndarray | None) -> np.ndarray:
-        """Exact distances from the original query points `index` to `target`, kept
-        with the face each was measured to (as bounds for later candidates)."""
-        d, face = target.nearest(self.queries[index])
+    def _distances(self, target: SurfaceDistance, index: np.ndarray, cand_keys: np.ndarray | None,
+                   exact_above: float) -> np.ndarray:
+        """Distances from the original query points `index` to `target` (exact above
+        `exact_above` and at the maximum, see SurfaceDistance.nearest), kept with the
+        face each was measured to (as bounds for later candidates)."""
+        d, face = target.nearest(self.queries[index], exact_above)
         if cand_keys is not None and len(index):
             self.bound[index], self.bound_key[index] = d, cand_keys[face]
         return d
