@@ -96,6 +96,17 @@ def test_noop_edit_and_parameter_change(mini):
     masses = [float(m) for m in re.findall(r"<mass>([^<]+)</mass>", sdf)]
     assert masses and sum(masses) == pytest.approx(175.0)
 
+    # the source saved again with the same geometry (a comment added): read again, and
+    # the LOD search, keyed on what the read made, does not run (the package does: its
+    # manifest records the file's hash)
+    obj = sources / "assets" / "pole" / "pole.obj"
+    obj.write_text(obj.read_text() + "# saved again\n")
+    resaved = explain(sources, out)
+    assert ran(resaved) == {"source:pole", "asset:pole", "scene"}
+    assert resaved["geometry:pole"]["reason"] == "up to date"
+    manifest = json.loads((out / "models" / "pole" / "manifest.json").read_text())
+    assert manifest["source"]["sha256"] == hashlib.sha256(obj.read_bytes()).hexdigest()
+
 
 def test_two_clean_builds_are_byte_identical(mini, tmp_path):
     sources, _ = mini

@@ -46,6 +46,29 @@ def test_edit_reruns_only_its_chain(src, tmp_path):
     assert (out / "joined.txt").read_text() == "ALPHA2+BETA"
 
 
+def test_a_rerun_that_makes_the_same_bytes_stops_the_chain(src, tmp_path):
+    """Early cutoff: a dependency enters a key by what it made, not by its own key."""
+    out = tmp_path / "build"
+    toy_graph.build(src, out)
+    (src / "a.txt").write_text("ALPHA")  # a new input that upper-cases to the same text
+    r = toy_graph.build(src, out)
+    assert r.ran == ["upper:a"]
+    assert {e["task"]: e["reason"] for e in r.explanations}["join"] == "up to date"
+
+    graph = toy_graph.tasks(src, out)
+    for t in graph:  # new code for both upper tasks, same output: join stays up to date
+        t.code = "v2" if t.name.startswith("upper:") else t.code
+    from pipeline.builder.scheduler import Scheduler
+    r = Scheduler(out).run(graph)
+    assert sorted(r.ran) == ["upper:a", "upper:b"]
+    assert [e["changed"] for e in r.explanations if e["ran"]] == [["code"], ["code"]]
+    (src / "b.txt").write_text("gamma")  # a real change still goes all the way
+    r = Scheduler(out).run(toy_graph.tasks(src, out))
+    assert sorted(r.ran) == ["join", "upper:b"]
+    assert {e["task"]: e["reason"] for e in r.explanations}["upper:a"] == "restored from cache"  # code v1 again
+    assert (out / "joined.txt").read_text() == "ALPHA+GAMMA"
+
+
 def test_same_content_new_mtime_runs_nothing(src, tmp_path):
     out = tmp_path / "build"
     toy_graph.build(src, out)
@@ -68,6 +91,72 @@ def test_shared_cache_fills_an_empty_build(src, tmp_path):
     assert r.ran == []
     assert {e["reason"] for e in r.explanations} == {"restored from cache"}
     assert (tmp_path / "b2" / "joined.txt").read_text() == "ALPHA+BETA"
+
+
+def test_in_process_executor_makes_what_the_pool_makes(src, tmp_path):
+    """The executor decides where tasks run, never what they make: the keys do not name
+    it, so a pool build after an in-process one finds nothing to do."""
+    from pipeline.builder.executors import in_process
+    from pipeline.builder.scheduler import Scheduler
+
+    pool_out, here_out = tmp_path / "pool", tmp_path / "here"
+    toy_graph.build(src, pool_out)
+    r = Scheduler(here_out, executor=in_process).run(toy_graph.tasks(src, here_out))
+    assert sorted(r.ran) == ["join", "upper:a", "upper:b"]
+    assert set(r.timings) == {"join", "upper:a", "upper:b"}
+    for rel in ("up/a.txt", "up/b.txt", "joined.txt"):
+        assert (here_out / rel).read_bytes() == (pool_out / rel).read_bytes()
+    assert toy_graph.build(src, here_out).ran == []
+
+
+def test_in_process_executor_reports_a_task_error_like_the_pool(src, tmp_path):
+    from pipeline.builder.executors import in_process
+    from pipeline.builder.scheduler import Scheduler
+
+    (src / "b.txt").unlink()  # upper:b's action fails reading it: a bug's trace, not a crash
+    tasks = toy_graph.tasks(src, tmp_path / "build")
+    tasks[1].inputs = ()
+    r = Scheduler(tmp_path / "build", executor=in_process).run(tasks)
+    assert [name for name, _ in r.failed] == ["upper:b"] and "FileNotFoundError" in r.failed[0][1]
+    assert "Traceback" in r.results["upper:b"]["trace"]
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_any_concurrent_futures_executor_runs_the_graph(src, tmp_path, jobs):
+    """A third-party engine plugs in as a concurrent.futures.Executor (a thread pool
+    stands for one here); the scheduler never has more tasks in flight than it asked for."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    from pipeline.builder.scheduler import Scheduler
+
+    class Counting(ThreadPoolExecutor):
+        def __init__(self, workers):
+            super().__init__(max_workers=4)  # more than asked: the scheduler is the limit
+            self.workers, self.active, self.peak, self.lock = workers, 0, 0, threading.Lock()
+
+        def submit(self, fn, /, *args, **kwargs):
+            def counted():
+                with self.lock:
+                    self.active += 1
+                    self.peak = max(self.peak, self.active)
+                try:
+                    return fn(*args, **kwargs)
+                finally:
+                    with self.lock:
+                        self.active -= 1
+            return super().submit(counted)
+
+    made = []
+    out = tmp_path / "build"
+    r = Scheduler(out, jobs=jobs, executor=lambda w: made.append(Counting(w)) or made[-1]).run(
+        toy_graph.tasks(src, out, delay=0.02))
+    assert sorted(r.ran) == ["join", "upper:a", "upper:b"]
+    assert (out / "joined.txt").read_text() == "ALPHA+BETA"
+    assert len(made) == 1 and made[0].workers.count == jobs and not made[0].workers.blender
+    assert made[0].peak == jobs  # both upper tasks at once with two, one at a time with one
+    assert Scheduler(out, jobs=jobs, executor=lambda w: made.append(w)).run(toy_graph.tasks(src, out)).ran == []
+    assert len(made) == 1  # a no-op build starts no executor
 
 
 def _run_script(src, out, delay):
@@ -154,7 +243,8 @@ def test_workers_import_bpy_only_for_a_task_that_will_run_and_reads_a_blend(src,
 def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypatch):
     """Native thread pools: each worker gets cores / tasks that can start together."""
     from pipeline.builder.graph import FileHasher, check_graph
-    from pipeline.builder.scheduler import Scheduler, init_worker
+    from pipeline.builder.executors import init_worker
+    from pipeline.builder.scheduler import Scheduler
     from pipeline.spare import SHARE_VARIABLE
 
     monkeypatch.setattr(os, "cpu_count", lambda: 4)
@@ -192,7 +282,8 @@ def test_build_given_fewer_cores_holds_its_workers_to_them(tmp_path):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from pipeline.builder.scheduler import Scheduler, init_worker
+    from pipeline.builder.executors import init_worker
+    from pipeline.builder.scheduler import Scheduler
 
     usable = _affinity()
     assert Scheduler(tmp_path / "b", jobs=1)._cpus() == (usable[0],)

@@ -1,8 +1,12 @@
 """Tasks and their keys: inputs (file content hashes) + parameters (sorted JSON) +
-code version -> outputs. A task whose key is unchanged does not run (DESIGN.md s.5).
+code version + what the dependencies made -> outputs. A task whose key is unchanged
+does not run (DESIGN.md s.5).
 
 Content decides. mtime and size only skip re-hashing a file whose (size, mtime_ns)
 matches what the last build hashed; a fresh CI checkout just hashes everything once.
+A dependency enters a key by the digest of the files it made, not by its own key
+(early cutoff): a task that reran and made the same bytes (a .blend saved again
+unchanged, a refactor of a reader) leaves the tasks after it up to date.
 """
 
 from __future__ import annotations
@@ -23,6 +27,12 @@ def canonical_json(data: Any) -> str:
 
 def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def output_digest(files: dict[str, str]) -> str:
+    """What a task made, as one hash: its files (paths relative to the build folder)
+    and their content hashes."""
+    return sha256_text(canonical_json(files))
 
 
 class FileHasher:
@@ -68,7 +78,8 @@ class Task:
     """One unit of work.
 
     inputs:  source files read (absolute paths); their content hashes enter the key.
-    deps:    names of tasks whose outputs this task reads (their keys enter this key).
+    deps:    names of tasks whose outputs this task reads (the digests of what they
+             made enter this key).
     params:  JSON-serialisable parameters; enter the key as sorted JSON.
     code:    code version of the steps the action runs.
     outputs: paths relative to the build folder, each produced by this task alone.
@@ -91,12 +102,13 @@ class Task:
     key: str = ""
     input_hashes: dict[str, str] = field(default_factory=dict)
 
-    def compute_key(self, hasher: FileHasher, dep_keys: dict[str, str], root: Path) -> str:
+    def compute_key(self, hasher: FileHasher, dep_digests: dict[str, str], root: Path) -> str:
+        """`dep_digests`: output_digest of each dependency, as made or restored."""
         self.input_hashes = {_rel(p, root): hasher(p) for p in self.inputs}
         material = {
             "name": self.name,
             "inputs": self.input_hashes,
-            "deps": {d: dep_keys[d] for d in sorted(self.deps)},
+            "deps": {d: dep_digests[d] for d in sorted(self.deps)},
             "params": self.params,
             "code": self.code,
         }
@@ -148,7 +160,7 @@ def check_graph(tasks: list[Task]) -> list[Task]:
     return order
 
 
-def explain(task: Task, previous: dict | None, cached: bool, dep_keys: dict[str, str]) -> dict:
+def explain(task: Task, previous: dict | None, cached: bool, dep_digests: dict[str, str]) -> dict:
     """Why a task runs or is skipped, from the key material of the last build."""
     if previous is None:
         reason = "restored from cache" if cached else "new"
@@ -161,7 +173,7 @@ def explain(task: Task, previous: dict | None, cached: bool, dep_keys: dict[str,
         if old_inputs.get(path) != task.input_hashes.get(path):
             changed.append(f"input {path}")
     for dep in sorted(set(previous.get("deps", {})) | set(task.deps)):
-        if previous.get("deps", {}).get(dep) != dep_keys.get(dep):
+        if previous.get("deps", {}).get(dep) != dep_digests.get(dep):
             changed.append(f"dependency {dep}")
     if canonical_json(previous.get("params")) != canonical_json(task.params):
         changed.append("parameters")
@@ -173,12 +185,15 @@ def explain(task: Task, previous: dict | None, cached: bool, dep_keys: dict[str,
     return {"task": task.name, "ran": True, "reason": reason, "changed": changed}
 
 
-def record(task: Task, dep_keys: dict[str, str]) -> dict:
-    """What the state file keeps of a task to explain the next build."""
+def record(task: Task, dep_digests: dict[str, str], files: dict[str, str]) -> dict:
+    """What the state file keeps of a task to explain the next build and to key the
+    tasks after it (`files`: what it made, path -> content hash)."""
     return {
         "key": task.key,
+        "digest": output_digest(files),
+        "files": sorted(files),
         "inputs": task.input_hashes,
-        "deps": {d: dep_keys[d] for d in sorted(task.deps)},
+        "deps": {d: dep_digests[d] for d in sorted(task.deps)},
         "params": task.params,
         "code": task.code,
         "outputs": list(task.outputs),

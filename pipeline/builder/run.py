@@ -8,12 +8,13 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+from .executors import ExecutorFactory, local_pool
 from .scheduler import BuildReport, Scheduler
 from .tasks import plan
 
 
 def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] | None = None,
-          cache: Path | None = None, quiet: bool = False) -> BuildReport:
+          cache: Path | None = None, quiet: bool = False, executor: ExecutorFactory = local_pool) -> BuildReport:
     p = plan(Path(sources), Path(out), only=only or None)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -22,7 +23,8 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
     with Progress(TextColumn("{task.description:<8}"), BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as progress:
         bars = {s: progress.add_task(s, total=sum(t.stage == s for t in p.tasks)) for s in stages}
-        scheduler = Scheduler(out, cache=cache, jobs=jobs, progress=lambda t: progress.advance(bars[t.stage]))
+        scheduler = Scheduler(out, cache=cache, jobs=jobs, progress=lambda t: progress.advance(bars[t.stage]),
+                              executor=executor)
         report = scheduler.run(p.tasks)
     if p.unused and not only:
         console.print(f"not built (no placement or scenario uses them): {', '.join(p.unused)}")

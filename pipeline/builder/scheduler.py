@@ -1,10 +1,13 @@
 """Runs a task graph over a pool of worker processes, incrementally and safely.
 
 - A task whose key matches the last build and whose outputs are in place is skipped;
-  one whose key is in the cache is restored; the rest run in workers.
-- Workers are spawned once and serve many tasks; a worker that will read .blend
-  files imports bpy once at start, and each gets its share of the cores for native
-  thread pools (`init_worker`, `_worker_setup`).
+  one whose key is in the cache is restored; the rest run in workers. A task's key
+  is known once its dependencies are done: it holds the digest of what they made
+  (graph.output_digest), so a rerun that made the same bytes stops there.
+- Tasks run on an executor (builder.executors; by default a pool of spawned
+  workers that serve many tasks each); the scheduler tells it how many tasks run at
+  once, each one's share of the cores, and whether a task that will run reads a
+  .blend (`_worker_setup`).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
@@ -12,24 +15,20 @@
 
 from __future__ import annotations
 
-import atexit
 import fcntl
 import json
-import multiprocessing
 import os
 import shutil
 import sys
-import time
-import traceback
 import uuid
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import UserError
 from .cache import Cache
-from .graph import FileHasher, Task, check_graph, explain, record
-from ..spare import SHARE_VARIABLE
+from .executors import ExecutorFactory, Workers, local_pool, run_task
+from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
 STATE_FILE = ".state.json"
 LOCK_FILE = ".lock"
@@ -74,54 +73,11 @@ class BuildLock:
         os.close(self.fd)
 
 
-# thread pools of the native libraries a task uses that a variable sizes (libigl's)
-THREAD_VARIABLES = ("IGL_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
-
-
-def init_worker(threads: int, blender: bool, cpus: tuple[int, ...] = ()) -> None:
-    """Worker initializer. Each worker's native thread pools get its share of the cores
-    (N workers each running as many threads as there are cores only trade places);
-    a variable the user set is kept. `cpus`: the CPUs a build given fewer cores than
-    the machine is held to (fcpw starts a thread per core it sees, whatever the
-    variables say). A worker that will read .blend files pays bpy's import once, not
-    once per task."""
-    if cpus:
-        os.sched_setaffinity(0, cpus)
-    for name in THREAD_VARIABLES:
-        os.environ.setdefault(name, str(threads))
-    os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (spare.beside)
-    if blender:
-        try:
-            import bpy  # noqa: F401
-        except ImportError:
-            return
-        # Registered after bpy's own, so it runs first: Blender's exit clean-up costs a
-        # quarter of a second per worker and the build waits for it. By then the worker
-        # has handed back every result (multiprocessing flushes its queues before).
-        atexit.register(_exit_now)
-
-
-def _exit_now() -> None:
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(0)
-
-
-def _run_in_worker(action, args: dict, staging: str) -> dict:
-    """Runs in a worker. User errors come back as data so the parent reports them."""
-    try:
-        t0 = time.perf_counter()
-        result = action(staging=Path(staging), **args) or {}
-        return {"ok": True, "result": result, "seconds": time.perf_counter() - t0}
-    except UserError as e:
-        return {"ok": False, "user_error": str(e)}
-    except Exception as e:  # a bug: keep the trace for the report, not the user's screen
-        return {"ok": False, "error": f"{type(e).__name__}: {e}", "trace": traceback.format_exc()}
-
-
 class Scheduler:
-    def __init__(self, build: Path, cache: Path | None = None, jobs: int | None = None, progress=None):
+    def __init__(self, build: Path, cache: Path | None = None, jobs: int | None = None, progress=None,
+                 executor: ExecutorFactory = local_pool):
         self.build = Path(build)
+        self.executor = executor
         self.cache = Cache(cache or self.build / ".cache")
         self.jobs = max(1, jobs or os.cpu_count() or 1)
         # `jobs` is the build's share of the machine: at most that many cores busy, so
@@ -142,8 +98,9 @@ class Scheduler:
         tmp.write_text(json.dumps(state, sort_keys=True, indent=1))
         os.replace(tmp, path)
 
-    def _outputs_in_place(self, previous: dict | None) -> bool:
-        if not previous:
+    def _fresh(self, previous: dict | None, key: str) -> bool:
+        """Whether the last build ran this key and its outputs are still in place."""
+        if not previous or previous.get("key") != key or "digest" not in previous:
             return False
         return all((self.build / rel).is_file() for rel in previous.get("files", []))
 
@@ -175,16 +132,24 @@ class Scheduler:
         an edit that reruns one asset's chain gives its task every core of the build's
         share, a cold build gives each worker its part of it. bpy (a second or so per
         worker) only when a task that will run reads a .blend: an edit of an asset's
-        metadata or of the floor plan reads none."""
-        keys: dict[str, str] = {}
-        stale = []
-        for t in order:  # keys need only inputs and dependency keys, not outputs
-            keys[t.name] = t.compute_key(hasher, keys, self.build)
-            previous = state["tasks"].get(t.name)
-            fresh = previous and previous.get("key") == keys[t.name] and self._outputs_in_place(previous)
-            if not fresh and not self.cache.has(keys[t.name]):
+        metadata or of the floor plan reads none. A task after one that will run is
+        counted as running too (whether it is cut off is known only then)."""
+        digests: dict[str, str] = {}
+        stale, names = [], set()
+        for t in order:
+            if names.intersection(t.deps):
                 stale.append(t)
-        names = {t.name for t in stale}
+                names.add(t.name)
+                continue
+            key = t.compute_key(hasher, digests, self.build)
+            previous = state["tasks"].get(t.name)
+            if self._fresh(previous, key):
+                digests[t.name] = previous["digest"]
+            elif self.cache.has(key):
+                digests[t.name] = output_digest(self.cache.meta(key)["files"])
+            else:
+                stale.append(t)
+                names.add(t.name)
         width = sum(1 for t in stale if not names.intersection(t.deps))
         return max(1, self.cores // max(1, min(self.jobs, width))), any(t.needs_blender for t in stale)
 
@@ -205,7 +170,7 @@ class Scheduler:
             shutil.rmtree(self.build / ".staging", ignore_errors=True)
             state = self._load_state()
             hasher = FileHasher(state.get("hashes"))
-            keys: dict[str, str] = {}
+            digests: dict[str, str] = {}  # what each finished task made (its dependents' keys hold it)
             pending = {t.name: t for t in order}
             done: set[str] = set()
             running: dict[Future, Task] = {}
@@ -222,34 +187,32 @@ class Scheduler:
                             report.failed.append((name, "skipped: a dependency failed"))
                             done.add(name)
                             continue
-                        task.compute_key(hasher, keys, self.build)
-                        keys[name] = task.key
+                        task.compute_key(hasher, digests, self.build)
                         previous = state["tasks"].get(name)
-                        if previous and previous.get("key") == task.key and self._outputs_in_place(previous):
-                            report.explanations.append(explain(task, previous, False, keys))
+                        if self._fresh(previous, task.key):
+                            report.explanations.append(explain(task, previous, False, digests))
                             report.results[name] = previous.get("result", {})
+                            digests[name] = previous["digest"]
                             done.add(name)
                             self._tick(task)
                             continue
                         if self.cache.has(task.key):
                             meta = self._place(task, task.key)
-                            report.explanations.append(explain(task, previous, True, keys))
-                            self._finish(state, task, keys, meta, report)
+                            report.explanations.append(explain(task, previous, True, digests))
+                            self._finish(state, task, digests, meta, report)
                             done.add(name)
                             continue
                         if len(running) >= self.jobs:
                             pending[name] = task  # its turn comes when a worker is free
                             continue
                         if pool is None:
-                            ctx = multiprocessing.get_context("spawn")
                             threads, needs_bpy = self._worker_setup(order, state, hasher)
-                            pool = ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=init_worker,
-                                                       initargs=(threads, needs_bpy, self._cpus()))
+                            pool = self.executor(Workers(self.jobs, threads, needs_bpy, self._cpus()))
                         staging = self.build / ".staging" / task.key
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)
-                        report.explanations.append(explain(task, previous, False, keys))
-                        running[pool.submit(_run_in_worker, task.action, task.args, str(staging))] = task
+                        report.explanations.append(explain(task, previous, False, digests))
+                        running[pool.submit(run_task, task.action, task.args, str(staging))] = task
                     if not running:
                         if pending:  # everything left waits on a failed task
                             continue
@@ -272,7 +235,7 @@ class Scheduler:
                         report.timings[task.name] = out["seconds"]
                         self.cache.put(task.key, staging, out["result"])
                         meta = self._place(task, task.key)
-                        self._finish(state, task, keys, meta, report)
+                        self._finish(state, task, digests, meta, report)
                         done.add(task.name)
                         state["hashes"] = hasher.memo
                         self._save_state(state)
@@ -284,10 +247,10 @@ class Scheduler:
                 shutil.rmtree(self.build / ".staging", ignore_errors=True)
         return report
 
-    def _finish(self, state: dict, task: Task, keys: dict, meta: dict, report: BuildReport) -> None:
-        entry = record(task, keys)
-        entry["files"] = sorted(meta["files"])
+    def _finish(self, state: dict, task: Task, digests: dict, meta: dict, report: BuildReport) -> None:
+        entry = record(task, digests, meta["files"])
         entry["result"] = meta.get("result", {})
+        digests[task.name] = entry["digest"]
         state["tasks"][task.name] = entry
         report.results[task.name] = entry["result"]
         self._tick(task)

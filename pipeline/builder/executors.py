@@ -1,0 +1,128 @@
+"""Where tasks run. The scheduler decides what runs and when; an executor only runs
+`run_task(action, args, staging)` calls and hands back `concurrent.futures` futures.
+
+An executor is a factory `Workers -> concurrent.futures.Executor`, called once per
+build when the first task has to run (a no-op build starts none). Tasks are pure
+functions of their declared inputs and write only into the staging folder they are
+given, so any engine that implements `concurrent.futures.Executor` can run them:
+the local process pool below, the calling process itself (`in_process`, for a
+debugger or a profiler), or a distributed engine's executor (dask.distributed's
+`Client.get_executor()`, for one) whose workers see the build folder and the
+sources at the same paths (a shared filesystem). Results come back as data; the
+scheduler alone moves outputs into the cache and the build folder.
+"""
+
+from __future__ import annotations
+
+import atexit
+import multiprocessing
+import os
+import sys
+import time
+import traceback
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from ..errors import UserError
+from ..spare import SHARE_VARIABLE
+
+# thread pools of the native libraries a task uses that a variable sizes (libigl's)
+THREAD_VARIABLES = ("IGL_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+@dataclass(frozen=True)
+class Workers:
+    """What a build asks of its workers.
+
+    count:   tasks in flight at once (the scheduler never submits more);
+    threads: cores each task may use for native thread pools and spare.beside;
+    blender: whether a task that will run reads a .blend (import bpy once per worker);
+    cpus:    CPUs to hold the workers to, empty for no affinity."""
+
+    count: int
+    threads: int
+    blender: bool
+    cpus: tuple[int, ...] = ()
+
+
+ExecutorFactory = Callable[[Workers], Executor]
+
+
+def run_task(action, args: dict, staging: str) -> dict:
+    """One task, wherever it runs. User errors come back as data so the scheduler
+    reports them; a bug keeps its trace for the report, not the user's screen."""
+    try:
+        t0 = time.perf_counter()
+        result = action(staging=Path(staging), **args) or {}
+        return {"ok": True, "result": result, "seconds": time.perf_counter() - t0}
+    except UserError as e:
+        return {"ok": False, "user_error": str(e)}
+    except Exception as e:
+        return {"ok": False, "error": f"{type(e).__name__}: {e}", "trace": traceback.format_exc()}
+
+
+# --- a local pool of spawned processes (the default) ---------------------------
+
+
+def local_pool(workers: Workers) -> Executor:
+    """`workers.count` spawned processes that serve many tasks each (spawned, not
+    forked: the scheduler's process holds threads, and Blender does not survive a
+    fork of a process that imported it)."""
+    return ProcessPoolExecutor(max_workers=workers.count, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=init_worker, initargs=(workers.threads, workers.blender, workers.cpus))
+
+
+def init_worker(threads: int, blender: bool, cpus: tuple[int, ...] = ()) -> None:
+    """Worker initializer. Each worker's native thread pools get its share of the cores
+    (N workers each running as many threads as there are cores only trade places);
+    a variable the user set is kept. `cpus`: the CPUs a build given fewer cores than
+    the machine is held to (fcpw starts a thread per core it sees, whatever the
+    variables say). A worker that will read .blend files pays bpy's import once, not
+    once per task."""
+    if cpus:
+        os.sched_setaffinity(0, cpus)
+    for name in THREAD_VARIABLES:
+        os.environ.setdefault(name, str(threads))
+    os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (spare.beside)
+    if blender:
+        try:
+            import bpy  # noqa: F401
+        except ImportError:
+            return
+        # Registered after bpy's own, so it runs first: Blender's exit clean-up costs a
+        # quarter of a second per worker and the build waits for it. By then the worker
+        # has handed back every result (multiprocessing flushes its queues before).
+        atexit.register(_exit_now)
+
+
+def _exit_now() -> None:
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+# --- the calling process -------------------------------------------------------
+
+
+class InProcess(Executor):
+    """Runs each task in the calling process when it is submitted, one at a time:
+    breakpoints, profilers and tracebacks see the task's own stack. Nothing is set up
+    (the process keeps its environment, bpy is imported by the first reader that
+    needs it), so a task gets one core unless the caller's environment says more."""
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        future: Future = Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except Exception as e:  # as a pool would hand it back (Ctrl-C goes on up)
+            future.set_exception(e)
+        return future
+
+
+def in_process(workers: Workers) -> Executor:
+    return InProcess()
+
+
+EXECUTORS: dict[str, ExecutorFactory] = {"local": local_pool, "in-process": in_process}
