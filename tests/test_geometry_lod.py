@@ -162,3 +162,79 @@ def test_board_ceiling_waits_for_every_finer_level():
     assert board.ceiling(1) == 1000
     assert lod._under_ceiling(result, [1000, 400], 1000) is None
     assert lod._under_ceiling(result, [999, 400], 1000) is result
+
+
+class DictMemo:
+    """A memo in a dict, counting what it was asked for."""
+
+    def __init__(self):
+        self.entries, self.hits, self.misses = {}, 0, 0
+
+    def get(self, key):
+        if key in self.entries:
+            self.hits += 1
+            return {k: v.copy() for k, v in self.entries[key].items()}
+        self.misses += 1
+        return None
+
+    def put(self, key, arrays):
+        self.entries[key] = {k: np.array(v) for k, v in arrays.items()}
+
+
+def _same_levels(a, b):
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert np.array_equal(x.faces, y.faces) and np.array_equal(x.vertices, y.vertices)
+        assert np.array_equal(x.kept, y.kept) and x.error_m == y.error_m
+
+
+def test_memo_gives_the_levels_the_search_gives_and_searches_only_what_changed(monkeypatch):
+    """A level is kept under its budget and its ceiling: with every level held, nothing
+    is searched; after an edit of the coarsest budget, that level alone."""
+    from pipeline import spare
+
+    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
+    v, f = lod.insulator_mesh(sheds=8, segments=48, target_faces=12000)
+    mesh = C.clean_mesh(ir.Mesh(v, f))
+    budgets = [0.002, 0.006, 0.02]
+    searched = []
+    real = lod._search_levels
+    monkeypatch.setattr(lod, "_search_levels", lambda judge, b, *a: searched.append(list(b)) or real(judge, b, *a))
+    memo = DictMemo()
+    plain = lod.simplify_levels(mesh.vertices, mesh.faces, budgets)
+    filled = lod.simplify_levels(mesh.vertices, mesh.faces, budgets, memo=memo)
+    recalled = lod.simplify_levels(mesh.vertices, mesh.faces, budgets, memo=memo)
+    assert searched == [budgets, budgets]  # the third call searched nothing
+    assert len(memo.entries) == 3 and memo.hits == 3
+    _same_levels(plain, filled)
+    _same_levels(plain, recalled)
+    assert len(plain[2].faces) < len(plain[1].faces) < len(plain[0].faces) < len(mesh.faces)
+
+    edited = budgets[:2] + [0.03]
+    searched.clear()
+    with_memo = lod.simplify_levels(mesh.vertices, mesh.faces, edited, memo=memo)
+    assert searched == [[0.03]]
+    _same_levels(lod.simplify_levels(mesh.vertices, mesh.faces, edited), with_memo)
+
+    # a finer level that changes moves the ceilings after it: those are searched again
+    searched.clear()
+    finer = [0.0025] + budgets[1:]
+    _same_levels(lod.simplify_levels(mesh.vertices, mesh.faces, finer, memo=memo),
+                 lod.simplify_levels(mesh.vertices, mesh.faces, finer))
+    assert searched[0] == finer
+
+
+def test_memo_entry_that_does_not_fit_is_searched_again(monkeypatch):
+    from pipeline import spare
+
+    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
+    v, f = sphere(4)
+    budgets = [0.005, 0.02]
+    memo = DictMemo()
+    plain = lod.simplify_levels(v, f, budgets, memo=memo)
+    for entry in memo.entries.values():  # corners past the mesh's vertices, then no arrays at all
+        entry["corners"] = entry["corners"] + 10**6
+    _same_levels(plain, lod.simplify_levels(v, f, budgets, memo=memo))
+    for key in memo.entries:
+        memo.entries[key] = {"found": np.ones(1, dtype=bool)}
+    _same_levels(plain, lod.simplify_levels(v, f, budgets, memo=memo))

@@ -74,6 +74,9 @@ def test_noop_edit_and_parameter_change(mini):
     assert ran(param) == {"geometry:pole", "asset:pole", "scene"}
     assert param["geometry:pole"]["changed"] == ["parameters"]
     assert param["source:pole"]["reason"] == "up to date"
+    # ... and of the LOD search, the edited level alone (the finer one is in the memo)
+    state = json.loads((out / ".state.json").read_text())
+    assert state["tasks"]["geometry:pole"]["result"]["lod_levels"] == {"recalled": 1, "searched": 1}
 
     # a reader's key (the source's up axis) reruns the read too; undone, the cache
     # has every task of the chain as it was

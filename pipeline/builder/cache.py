@@ -16,6 +16,12 @@ from pathlib import Path
 
 from ..digest import sha256_file
 
+CACHE_FOLDER = ".cache"  # in the build folder, unless a build is given another (--cache)
+
+
+def cache_root(build: Path, cache: Path | None = None) -> Path:
+    return Path(cache) if cache is not None else Path(build) / CACHE_FOLDER
+
 
 class Cache:
     def __init__(self, root: Path):
@@ -68,7 +74,10 @@ class Cache:
         return meta
 
     def clean_tmp(self) -> None:
-        """Remove leftovers of killed builds (never complete entries)."""
+        """Remove leftovers of killed builds (never complete entries; memo files too)."""
         if self.root.is_dir():
             for p in self.root.glob(".tmp-*"):
-                shutil.rmtree(p, ignore_errors=True)
+                if p.is_dir():
+                    shutil.rmtree(p, ignore_errors=True)
+                else:
+                    p.unlink(missing_ok=True)

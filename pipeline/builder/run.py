@@ -15,7 +15,7 @@ from .tasks import plan
 
 def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] | None = None,
           cache: Path | None = None, quiet: bool = False, executor: ExecutorFactory = local_pool) -> BuildReport:
-    p = plan(Path(sources), Path(out), only=only or None)
+    p = plan(Path(sources), Path(out), only=only or None, cache=cache)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     console = Console(file=sys.stderr, quiet=quiet)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import UserError
-from .cache import Cache
+from .cache import Cache, cache_root
 from .executors import ExecutorFactory, Workers, local_pool, run_task
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
@@ -78,7 +78,7 @@ class Scheduler:
                  executor: ExecutorFactory = local_pool):
         self.build = Path(build)
         self.executor = executor
-        self.cache = Cache(cache or self.build / ".cache")
+        self.cache = Cache(cache_root(self.build, cache))
         self.jobs = max(1, jobs or os.cpu_count() or 1)
         # `jobs` is the build's share of the machine: at most that many cores busy, so
         # `--jobs 1` is one core (a shared CI runner's cap), not one worker with threads

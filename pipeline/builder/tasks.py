@@ -65,14 +65,15 @@ def read_source(cfg: config.AssetConfig) -> ir.Asset:
     return read_mesh(cfg)
 
 
-def asset_steps(cfg: config.AssetConfig) -> list[tuple[str, object]]:
-    """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order."""
+def asset_steps(cfg: config.AssetConfig, memo=None) -> list[tuple[str, object]]:
+    """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order.
+    `memo`: where the LOD search keeps its levels between builds (geometry.lod.LevelMemo)."""
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain
 
     return [
         ("collision", collision_step(CollisionOptions(mode=cfg.collision_mode))),
-        ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m))),
+        ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m), memo)),
     ]
 
 
@@ -133,22 +134,28 @@ def build_source(staging: Path, asset_toml: str) -> dict:
     return {"asset": cfg.id, "timings": timings}
 
 
-def build_geometry(staging: Path, asset_toml: str, build: str) -> dict:
+def build_geometry(staging: Path, asset_toml: str, build: str, memo: str | None = None,
+                   memo_namespace: str = "") -> dict:
     """Task action: one asset's cleaned source through the geometry steps, written as
-    an .ir file (the source task's findings carried along)."""
+    an .ir file (the source task's findings carried along). `memo`: the cache folder
+    whose memo keeps the LOD search's levels (builder.memo), under `memo_namespace`
+    (the task's code version)."""
     from . import irfile
+    from .memo import ArrayMemo
 
     cfg = config.load_asset_config(Path(asset_toml))
     asset, extra = irfile.read(Path(build) / source_path(cfg.id))
     timings = {}
-    for name, step in asset_steps(cfg):
+    levels = None if memo is None else ArrayMemo(Path(memo), memo_namespace)
+    for name, step in asset_steps(cfg, levels):
         t = time.perf_counter()
         asset = step(asset)
         timings[name] = time.perf_counter() - t
     out = Path(staging) / ir_path(cfg.id)
     out.parent.mkdir(parents=True, exist_ok=True)
     irfile.write(out, asset, extra)
-    return {"asset": cfg.id, "timings": timings}
+    reused = {} if levels is None else {"lod_levels": {"recalled": levels.hits, "searched": levels.puts}}
+    return {"asset": cfg.id, "timings": timings, **reused}
 
 
 def with_metadata(asset: ir.Asset, cfg: config.AssetConfig) -> ir.Asset:
@@ -227,9 +234,11 @@ def load_sources(sources: Path, memo: Path | None = None) -> Plan:
     return Plan(site=site, floorplan=fp, assets=assets, used=used, unused=unused)
 
 
-def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
-    """The task graph for a sources folder. `only`: just these assets' packages."""
+def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path | None = None) -> Plan:
+    """The task graph for a sources folder. `only`: just these assets' packages;
+    `cache`: the cache folder the build uses (default: in the build folder)."""
     from ..ingest.floorplan import MEMO_NAME
+    from .cache import cache_root
 
     p = load_sources(sources, memo=Path(build) / MEMO_NAME)
     wanted = p.used
@@ -262,7 +271,8 @@ def plan(sources: Path, build: Path, only: list[str] | None = None) -> Plan:
             name=f"geometry:{asset_id}",
             stage="geometry",
             action=build_geometry,
-            args={"asset_toml": str(toml), "build": str(Path(build).resolve())},
+            args={"asset_toml": str(toml), "build": str(Path(build).resolve()),
+                  "memo": str(cache_root(build, cache).resolve()), "memo_namespace": geometry_code},
             deps=(f"source:{asset_id}",),
             params={"asset": asset_id, "asset.toml": geometry_params(cfg)},
             code=geometry_code,

@@ -20,6 +20,7 @@ float32: 10^7 m coordinates would otherwise lose everything below a metre).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import subprocess
@@ -28,7 +29,7 @@ import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -585,9 +586,18 @@ def simplify_checked(vertices: np.ndarray, faces: np.ndarray, budget_m: float, m
     return simplify_levels(vertices, faces, (budget_m,), method, iterations, samples, normals, parts)[0]
 
 
+class LevelMemo(Protocol):
+    """Where searched levels are kept between runs, by key (builder.memo.ArrayMemo):
+    arrays in, the same arrays out, or None for a key it does not hold."""
+
+    def get(self, key: str) -> dict[str, np.ndarray] | None: ...
+
+    def put(self, key: str, arrays: dict[str, np.ndarray]) -> None: ...
+
+
 def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: str = "meshoptimizer",
                     iterations: int = ITERATIONS, samples: int = MEASURE_SAMPLES, normals: np.ndarray | None = None,
-                    parts: np.ndarray | None = None) -> list[Simplified]:
+                    parts: np.ndarray | None = None, memo: LevelMemo | None = None) -> list[Simplified]:
     """The coarsest checked simplification of a CLEAN mesh within each of the
     ascending `budgets_m` (metres), one per budget, each no finer than the one before.
 
@@ -600,6 +610,12 @@ def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: 
     face, so crisp edges and UVs survive. `parts: (n,)` ids keep separate parts from
     welding together. The mesh is welded and indexed once for all budgets, which are
     searched side by side when the worker has cores to spare (`_search_levels`).
+
+    `memo` (meshoptimizer only): each level's search result is kept there under the
+    hash of everything it depends on (the welded mesh, samples, iterations, its
+    budget and the finer level's face count, its ceiling), and the levels it holds
+    are not searched again: an edit of the coarsest budget searches that level alone.
+    The results are the same with or without it.
     """
     if method not in METHODS:
         raise ValueError(f"unknown simplifier {method!r}; one of {METHODS}")
@@ -622,14 +638,94 @@ def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: 
     attrs = [] if parts is None else [(np.asarray(parts, dtype=np.float64)[:, None], 0.5)]
     rep = _clean.weld_map(local, _clean.weld_tolerance(local), attrs)
     first, welded_index = np.unique(rep, return_inverse=True)
-    judge = _Judge(local[first], welded_index[faces], samples)
-    for best in _search_levels(judge, budgets_m, iterations, len(faces)):
-        if best is not None:
-            corners = _original_corners(best.kept[best.faces], welded_index, local, normals)
+    welded, welded_faces = local[first], welded_index[faces]
+    keys = None if memo is None else _LevelKeys(welded, welded_faces, samples, iterations, budgets_m, len(faces))
+    levels = [] if memo is None else _recall(memo, keys, len(welded))
+    if len(levels) < len(budgets_m):
+        judge = _Judge(welded, welded_faces, samples)
+        searched = _search_levels(judge, budgets_m[len(levels):], iterations, _ceiling_after(levels, len(faces)))
+        for best in searched:
+            level = None if best is None else _Level(best.kept[best.faces], best.error_m, best.flipped,
+                                                     best.non_manifold_added)
+            if memo is not None:
+                memo.put(keys.next(levels), _level_arrays(level))
+            levels.append(level)
+    for level in levels:
+        if level is not None:
+            corners = _original_corners(level.corners, welded_index, local, normals)
             used, new_faces = _clean.compact(corners, len(vertices))
-            prev = Simplified(vertices[used], new_faces, used, best.error_m, best.flipped, best.non_manifold_added)
+            prev = Simplified(vertices[used], new_faces, used, level.error_m, level.flipped, level.non_manifold_added)
         out.append(prev)
     return out
+
+
+@dataclass(frozen=True)
+class _Level:
+    """What a level's search leaves for simplify_levels: the faces on the welded
+    vertices (j, 3), the measured error and the checks' counts."""
+
+    corners: np.ndarray
+    error_m: float
+    flipped: int
+    non_manifold_added: int
+
+
+def _ceiling_after(levels: list[_Level | None], faces: int) -> int:
+    """The face count a level after `levels` must beat (_search_levels' rule)."""
+    for level in reversed(levels):
+        if level is not None:
+            return len(level.corners)
+    return faces
+
+
+class _LevelKeys:
+    """Memo keys of a mesh's levels: one hash of the searched mesh and the search's
+    settings, then per level its budget and its ceiling (known once the finer levels
+    are)."""
+
+    def __init__(self, welded: np.ndarray, welded_faces: np.ndarray, samples: int, iterations: int, budgets,
+                 faces: int):
+        h = hashlib.sha256()
+        for a in (np.ascontiguousarray(welded, dtype="<f8"), np.ascontiguousarray(welded_faces, dtype="<i8")):
+            h.update(repr(a.shape).encode())
+            h.update(a.tobytes())
+        h.update(repr((samples, iterations)).encode())
+        self.mesh, self.budgets, self.faces = h.hexdigest(), [float(b) for b in budgets], faces
+
+    def next(self, levels: list[_Level | None]) -> str:
+        """The key of the level after `levels`."""
+        i = len(levels)
+        material = (self.mesh, repr(self.budgets[i]), _ceiling_after(levels, self.faces))
+        return hashlib.sha256(repr(material).encode()).hexdigest()
+
+
+def _level_arrays(level: _Level | None) -> dict[str, np.ndarray]:
+    if level is None:
+        return {"found": np.zeros(1, dtype=np.bool_)}
+    return {"found": np.ones(1, dtype=np.bool_), "corners": np.asarray(level.corners, dtype=np.int64),
+            "error_m": np.array([level.error_m], dtype=np.float64),
+            "counts": np.array([level.flipped, level.non_manifold_added], dtype=np.int64)}
+
+
+def _recall(memo: LevelMemo, keys: _LevelKeys, n_welded: int) -> list[_Level | None]:
+    """The leading levels the memo holds, in order; stops at the first it lacks (a
+    damaged entry counts as lacking: it is searched again and replaced)."""
+    levels: list[_Level | None] = []
+    while len(levels) < len(keys.budgets):
+        arrays = memo.get(keys.next(levels))
+        try:
+            if not bool(arrays["found"][0]):
+                levels.append(None)
+                continue
+            corners = arrays["corners"]
+            if corners.dtype != np.int64 or corners.ndim != 2 or corners.shape[1] != 3 or not len(corners) \
+                    or corners.min() < 0 or corners.max() >= n_welded:
+                break
+            flipped, added = (int(c) for c in arrays["counts"][:2])
+            levels.append(_Level(corners, float(arrays["error_m"][0]), flipped, added))
+        except (TypeError, KeyError, IndexError, ValueError):
+            break
+    return levels
 
 
 def _original_corners(welded_faces: np.ndarray, welded_index: np.ndarray, vertices: np.ndarray,
@@ -698,7 +794,7 @@ def _lod_mesh(mesh: ir.Mesh, r: Simplified) -> ir.Mesh:
     )
 
 
-def lod_chain(options: LodOptions = LodOptions()) -> Callable[[ir.Asset], ir.Asset]:
+def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None) -> Callable[[ir.Asset], ir.Asset]:
     """Step: Visual.lods = (authored, LOD1, ..., LODk) and Asset.lods = LodInfo for
     levels 0..k (level 0: the authored meshes, budget and error 0).
 
@@ -710,7 +806,7 @@ def lod_chain(options: LodOptions = LodOptions()) -> Callable[[ir.Asset], ir.Ass
     visual. A level's error is the measured two-sided Hausdorff distance of the union
     (the largest part's, per visual). Frozen visuals (shape keys, state bindings)
     repeat their Mesh object at every level; a part that would vanish keeps its
-    previous level's mesh, so nothing disappears.
+    previous level's mesh, so nothing disappears. `memo`: see simplify_levels.
     """
     budgets = tuple(float(b) for b in options.budgets_m)
     if list(budgets) != sorted(budgets) or any(b <= 0 for b in budgets):
@@ -733,7 +829,7 @@ def lod_chain(options: LodOptions = LodOptions()) -> Callable[[ir.Asset], ir.Ass
                     free.append(vis)
             groups = [free] if options.method == "meshoptimizer" else [[v] for v in free]
             for group in (g for g in groups if g):
-                lods, errs = _group_chain(group, budgets, options, linear_scale(link.pose))
+                lods, errs = _group_chain(group, budgets, options, linear_scale(link.pose), memo)
                 chains.update(lods)
                 errors = np.maximum(errors, errs)
             visuals = [replace(v, lods=tuple(chains[v.name])) for v in link.visuals]
@@ -746,7 +842,8 @@ def lod_chain(options: LodOptions = LodOptions()) -> Callable[[ir.Asset], ir.Ass
     return step
 
 
-def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scale: float):
+def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scale: float,
+                 memo: LevelMemo | None = None):
     """LOD chains of visuals simplified as one mesh in their link's frame.
     Returns ({visual name: [mesh per level]}, errors per level in the model frame)."""
     poses = [v.pose for v in group]
@@ -763,7 +860,7 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
     errors = np.zeros(len(budgets))
     known: dict = {}  # id(mesh) -> (mesh, its validator error codes)
     levels = simplify_levels(vertices, faces, [b / scale for b in budgets], options.method, options.iterations,
-                             options.samples, normals=normals, parts=parts_id)
+                             options.samples, normals=normals, parts=parts_id, memo=memo)
     for i, r in enumerate(levels):
         errors[i] = r.error_m * scale
         if r.faces is faces:
