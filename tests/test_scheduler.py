@@ -291,3 +291,11 @@ def test_build_given_fewer_cores_holds_its_workers_to_them(tmp_path):
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=init_worker,
                              initargs=(1, False, (usable[0],))) as pool:
         assert pool.submit(_affinity).result() == [usable[0]]
+
+
+def test_init_worker_in_a_main_process_keeps_its_exit_code():
+    """Workers skip the interpreter's exit clean-up (os._exit); a main process that
+    calls init_worker (a test does) must still exit with its own code."""
+    code = "import sys; from pipeline.builder.executors import init_worker; init_worker(1, False); sys.exit(3)"
+    proc = subprocess.run([sys.executable, "-c", code], cwd=HERE.parent, timeout=120)
+    assert proc.returncode == 3

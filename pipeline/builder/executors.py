@@ -90,10 +90,13 @@ def init_worker(threads: int, blender: bool, cpus: tuple[int, ...] = ()) -> None
         try:
             import bpy  # noqa: F401
         except ImportError:
-            return
-        # Registered after bpy's own, so it runs first: Blender's exit clean-up costs a
-        # quarter of a second per worker and the build waits for it. By then the worker
-        # has handed back every result (multiprocessing flushes its queues before).
+            pass
+    # Registered after bpy's own, so it runs first: Blender's exit clean-up costs a
+    # quarter of a second per worker, and tearing down the interpreter's modules a
+    # tenth without it, and the build waits for both. By then the worker has handed
+    # back every result (multiprocessing flushes its queues before). Only in a
+    # worker: a main process keeps its exit code.
+    if multiprocessing.parent_process() is not None:
         atexit.register(_exit_now)
 
 
