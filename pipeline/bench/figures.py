@@ -126,10 +126,11 @@ def build_times(d: dict):
     plt = _plt()
     items = [("cold, 1 worker", d["cold_j1"]), ("cold, 2 workers", d["cold_j2"]),
              ("one-asset edit, source file", d["one_asset_source_edit"]),
+             ("one-asset edit, source saved again", d["one_asset_resave"]),
              ("one-asset edit, LOD budget", d["one_asset_geometry_edit"]),
              ("LOD budget edit, each asset", d["every_asset_geometry_edit"]),
              ("one-asset edit, metadata", d["one_asset_edit"]), ("no-op", d["noop"])]
-    colors = ["C0", "C0", "C1", "C1", "C1", "C1", "C2"]
+    colors = ["C0", "C0", "C1", "C1", "C1", "C1", "C1", "C2"]
     large = d["large_plan"]
     for label, key, color in (("cold, 1 worker", "cold_j1", "C0"), ("cold, 2 workers", "cold_j2", "C0"),
                               ("one-asset edit, source file", "one_asset_source_edit", "C1"),
@@ -148,7 +149,8 @@ def build_times(d: dict):
         ax.text(v, i, f" {v:.2f} s", va="center", fontsize=7)
     fig.tight_layout()
     return _png(fig), ("What a `twin build` costs in each situation (median bars, min-max whiskers): a cold build, the "
-                       "same with both cores, rebuilding after one asset's edit (of its source file: the whole chain; of an "
+                       "same with both cores, rebuilding after one asset's edit (of its source file: the whole chain; the "
+                       "source saved again unchanged: its read and package, the LOD search cut off; of an "
                        "LOD budget: the LOD search, the package and the scene, also for every asset in turn, whiskers "
                        "from the smallest to the largest; of its metadata: the package and the scene), and rebuilding "
                        "with nothing changed; then the same on the plan with "
