@@ -299,3 +299,18 @@ def test_init_worker_in_a_main_process_keeps_its_exit_code():
     code = "import sys; from pipeline.builder.executors import init_worker; init_worker(1, False); sys.exit(3)"
     proc = subprocess.run([sys.executable, "-c", code], cwd=HERE.parent, timeout=120)
     assert proc.returncode == 3
+
+
+def test_a_build_on_a_shared_cache_leaves_another_builds_temporary_entries(tmp_path):
+    """Two build folders, one --cache: the second build to start must not sweep the
+    entry the first is writing; once alone, a build sweeps what a killed one left."""
+    from pipeline.builder.cache import Cache
+
+    root = tmp_path / "cache"
+    with Cache(root).in_use():
+        (root / ".tmp-being-written").mkdir()
+        (root / ".tmp-memo.npz").write_bytes(b"half")
+        with Cache(root).in_use():
+            assert (root / ".tmp-being-written").is_dir() and (root / ".tmp-memo.npz").is_file()
+    with Cache(root).in_use():
+        assert not list(root.glob(".tmp-*"))

@@ -4,19 +4,26 @@ Layout: <root>/<key[:2]>/<key>/files/<output paths...> and meta.json (written la
 An entry appears by one directory rename, so a build killed at any moment leaves
 either a whole entry or none: never a poisoned one. Restoring copies each file to a
 temporary name beside its destination and renames it into place.
+
+A cache may be shared by builds of several build folders (`--cache DIR`), running at
+once: each holds a shared lock on it while it runs (`in_use`), and only a build that
+finds no other sweeps the temporary entries that killed builds left.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
 import uuid
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..digest import sha256_file
 
 CACHE_FOLDER = ".cache"  # in the build folder, unless a build is given another (--cache)
+USERS_FILE = ".users"  # locked shared by every build using the cache
 
 
 def cache_root(build: Path, cache: Path | None = None) -> Path:
@@ -72,6 +79,25 @@ class Cache:
             shutil.copyfile(src_root / rel, tmp)
             os.replace(tmp, dest)
         return meta
+
+    @contextmanager
+    def in_use(self):
+        """Held by a build for as long as it writes here. The first build on the cache
+        sweeps what killed builds left; one that starts beside another leaves the other's
+        temporary entries alone."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.root / USERS_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                self.clean_tmp()
+            except BlockingIOError:
+                pass  # another build is writing here
+            fcntl.flock(fd, fcntl.LOCK_SH)
+            yield self
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
 
     def clean_tmp(self) -> None:
         """Remove leftovers of killed builds (never complete entries; memo files too)."""

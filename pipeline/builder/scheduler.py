@@ -165,8 +165,7 @@ class Scheduler:
     def run(self, tasks: list[Task], stop_on_error: bool = True) -> BuildReport:
         order = check_graph(tasks)
         report = BuildReport()
-        with BuildLock(self.build, notify=lambda m: print(m, file=sys.stderr)):
-            self.cache.clean_tmp()
+        with BuildLock(self.build, notify=lambda m: print(m, file=sys.stderr)), self.cache.in_use():
             shutil.rmtree(self.build / ".staging", ignore_errors=True)
             state = self._load_state()
             hasher = FileHasher(state.get("hashes"))
