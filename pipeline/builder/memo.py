@@ -7,7 +7,8 @@ Entries are .npz files of plain arrays (read without pickles), under the hash of
 the step's key and the code version of the task that keeps them, so new code never
 reads an old entry. Each is written to a temporary name in the cache's root (which
 `Cache.clean_tmp` sweeps) and renamed into place: a killed build leaves whole
-entries or none. An entry that cannot be read is a miss.
+entries or none. An entry that cannot be read is a miss, and the step's result,
+computed again, replaces it.
 """
 
 from __future__ import annotations
@@ -47,8 +48,6 @@ class ArrayMemo:
     def put(self, key: str, arrays: dict[str, np.ndarray]) -> None:
         self.puts += 1
         final = self.path(key)
-        if final.is_file():
-            return
         buffer = io.BytesIO()
         np.savez(buffer, **arrays)
         tmp = self.root / f".tmp-{uuid.uuid4().hex}.npz"

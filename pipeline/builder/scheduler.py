@@ -1,4 +1,4 @@
-"""Runs a task graph over a pool of worker processes, incrementally and safely.
+"""Runs a task graph on an executor (worker processes by default), incrementally and safely.
 
 - A task whose key matches the last build and whose outputs are in place is skipped;
   one whose key is in the cache is restored; the rest run in workers. A task's key

@@ -713,6 +713,8 @@ def _recall(memo: LevelMemo, keys: _LevelKeys, n_welded: int) -> list[_Level | N
     levels: list[_Level | None] = []
     while len(levels) < len(keys.budgets):
         arrays = memo.get(keys.next(levels))
+        if arrays is None:
+            break
         try:
             if not bool(arrays["found"][0]):
                 levels.append(None)
