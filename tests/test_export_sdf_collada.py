@@ -268,3 +268,27 @@ def test_fmt_join_spells_every_float_as_fmt_does():
     values += list(rng.normal(size=20_000) * 10.0 ** rng.integers(-8, 9, 20_000)) + [i / 4 for i in range(-40, 40)]
     assert fmt_join(values) == " ".join(fmt(v) for v in values)
     assert fmt_join([-0.0, 3.0, 0.5]) == "0 3 0.5"
+
+
+def test_a_level_that_repeats_a_finer_mesh_is_formatted_once(tmp_path, monkeypatch):
+    """A visual whose LOD2 has LOD1's content (another Mesh object, as read back from
+    an .ir file) gets LOD1's bytes; a different mesh its own document."""
+    from dataclasses import replace
+
+    asset = articulated_asset()
+    link = asset.links[0]
+    visual = link.visuals[0]
+    coarse = visual.lods[-1]
+    again = ir.Mesh(coarse.vertices.copy(), coarse.faces.copy(), None if coarse.normals is None else coarse.normals.copy(),
+                    None if coarse.uvs is None else coarse.uvs.copy())
+    visual = replace(visual, lods=(*visual.lods, again))
+    asset = asset.with_(links=(replace(link, visuals=(visual, *link.visuals[1:])), *asset.links[1:]))
+    calls = []
+    real = collada_writer._dae_bytes
+    monkeypatch.setattr(collada_writer, "_dae_bytes", lambda name, mesh, mat: calls.append(name) or real(name, mesh, mat))
+    collada_writer.write(asset, tmp_path / "pkg")
+    levels = len(visual.lods)
+    files = [tmp_path / "pkg" / names.mesh_file(link.name, visual.name, k) for k in range(levels)]
+    assert calls.count(visual.name) == levels - 1
+    assert files[-1].read_bytes() == files[-2].read_bytes() != files[0].read_bytes()
+    collada.Collada(str(files[-1]), validate_output=True)

@@ -7,6 +7,7 @@ collision) frame, because the SDF <visual><pose> places it. Metres, Z up.
 from __future__ import annotations
 
 import datetime
+import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -36,23 +37,37 @@ def write(asset: ir.Asset, folder: Path) -> list[str]:
 
     A visual writes as many LODs as it has (names.mesh_file(link, visual, k) for
     k < len(visual.lods)); readers fall back to its coarsest one, as Visual.lod does.
-    Returns the package-relative paths written, sorted.
+    Returns the package-relative paths written, sorted. A level that repeats a finer
+    one's mesh (a part kept at a coarser level, a frozen visual: 789 of the sample's
+    1964 visual LOD files) gets the finer level's bytes, not a second formatting.
     """
     folder = Path(folder)
     (folder / "meshes").mkdir(parents=True, exist_ok=True)
     written = []
     for link, visual in asset.visuals():
         material = _material(asset, visual)
+        made: dict[str, bytes] = {}  # mesh content -> the visual's document of it
         for level, mesh in enumerate(visual.lods):
             rel = names.mesh_file(link.name, visual.name, level)
-            _write_dae(folder / rel, visual.name, mesh, material)
+            key = _mesh_key(mesh)
+            if key not in made:
+                made[key] = _dae_bytes(visual.name, mesh, material)
+            _write(folder / rel, made[key])
             written.append(rel)
     for link in asset.links:
         for col in link.collisions:
             rel = names.collision_file(link.name, col.name)
-            _write_dae(folder / rel, col.name, col.mesh, None)
+            _write(folder / rel, _dae_bytes(col.name, col.mesh, None))
             written.append(rel)
     return sorted(written)
+
+
+def _mesh_key(mesh: ir.Mesh) -> str:
+    """A hash of what the document of a mesh holds (positions, faces, normals, UVs)."""
+    h = hashlib.sha256()
+    for a in (mesh.vertices, mesh.faces, mesh.normals, mesh.uvs):
+        h.update(b"-" if a is None else repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
 
 
 def _material(asset: ir.Asset, visual: ir.Visual) -> ir.Material:
@@ -63,12 +78,15 @@ def _material(asset: ir.Asset, visual: ir.Visual) -> ir.Material:
                         f"material {visual.material!r} is not among the asset's materials") from None
 
 
-def _write_dae(path: Path, node_name: str, mesh: ir.Mesh, material: ir.Material | None) -> None:
+def _dae_bytes(node_name: str, mesh: ir.Mesh, material: ir.Material | None) -> bytes:
     doc, arrays = _document(node_name, mesh, material)
     doc.save()
     root = doc.xmlnode.getroot()
     _reformat_floats(root, arrays)
-    data = etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
+    return etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
+
+
+def _write(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(data)
 
