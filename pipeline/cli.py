@@ -81,7 +81,8 @@ def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cac
     elif explain:
         for e in tasks:
             took = f" ({e['seconds']:.2f} s)" if "seconds" in e else ""
-            click.echo(f"{'RAN ' if e['ran'] else 'skip'} {e['task']}: {e['reason']}{took}")
+            same = f" ({', '.join(e['cut_off_after'])} made the same files)" if "cut_off_after" in e else ""
+            click.echo(f"{'RAN ' if e['ran'] else 'skip'} {e['task']}: {e['reason']}{same}{took}")
     if report.failed:
         for name, msg in report.failed:
             click.echo(f"error: {name}: {msg}", err=True)

@@ -107,6 +107,8 @@ def test_noop_edit_and_parameter_change(mini):
     resaved = explain(sources, out)
     assert ran(resaved) == {"source:pole", "asset:pole", "scene"}
     assert resaved["geometry:pole"]["reason"] == "up to date"
+    assert resaved["geometry:pole"]["cut_off_after"] == ["source:pole"]
+    assert "cut_off_after" not in resaved["geometry:kiosk"]  # its source did not run
     manifest = json.loads((out / "models" / "pole" / "manifest.json").read_text())
     assert manifest["source"]["sha256"] == hashlib.sha256(obj.read_bytes()).hexdigest()
 

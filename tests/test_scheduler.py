@@ -53,7 +53,8 @@ def test_a_rerun_that_makes_the_same_bytes_stops_the_chain(src, tmp_path):
     (src / "a.txt").write_text("ALPHA")  # a new input that upper-cases to the same text
     r = toy_graph.build(src, out)
     assert r.ran == ["upper:a"]
-    assert {e["task"]: e["reason"] for e in r.explanations}["join"] == "up to date"
+    join = {e["task"]: e for e in r.explanations}["join"]
+    assert join["reason"] == "up to date" and join["cut_off_after"] == ["upper:a"]
 
     graph = toy_graph.tasks(src, out)
     for t in graph:  # new code for both upper tasks, same output: join stays up to date

@@ -170,6 +170,7 @@ class Scheduler:
             state = self._load_state()
             hasher = FileHasher(state.get("hashes"))
             digests: dict[str, str] = {}  # what each finished task made (its dependents' keys hold it)
+            remade: set[str] = set()  # tasks run or restored in this build
             pending = {t.name: t for t in order}
             done: set[str] = set()
             running: dict[Future, Task] = {}
@@ -189,12 +190,17 @@ class Scheduler:
                         task.compute_key(hasher, digests, self.build)
                         previous = state["tasks"].get(name)
                         if self._fresh(previous, task.key):
-                            report.explanations.append(explain(task, previous, False, digests))
+                            why = explain(task, previous, False, digests)
+                            renewed = sorted(d for d in task.deps if d in remade)
+                            if renewed:  # they reran (or came from the cache) and made the same files
+                                why["cut_off_after"] = renewed
+                            report.explanations.append(why)
                             report.results[name] = previous.get("result", {})
                             digests[name] = previous["digest"]
                             done.add(name)
                             self._tick(task)
                             continue
+                        remade.add(name)
                         if self.cache.has(task.key):
                             meta = self._place(task, task.key)
                             report.explanations.append(explain(task, previous, True, digests))
