@@ -3,10 +3,16 @@
 Every failure is a `UserError` naming the file and the key (e.g. `plan.crs`).
 Defaults live in the JSON Schemas and are filled in here, so the schema is the one
 place that documents them.
+
+The loaders take an optional `PassedChecks`: keys (content hashes) of checks that
+passed before, which they skip, and of those they pass. The planner keeps it in the
+build folder, so a no-op build neither imports jsonschema and pyproj nor runs their
+checks again on content they already passed.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import tomllib
@@ -14,8 +20,6 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
-
-import jsonschema
 
 from .errors import UserError
 
@@ -43,18 +47,50 @@ def read_toml(path: Path) -> dict:
         raise UserError(path, None, f"TOML syntax error: {e}") from None
 
 
-def _key_path(error: jsonschema.ValidationError) -> str:
+def _key_path(error) -> str:
+    """`error`: a jsonschema.ValidationError."""
     parts = []
     for p in error.absolute_path:
         parts.append(f"[{p}]" if isinstance(p, int) else (("." if parts else "") + str(p)))
     return "".join(parts) or "(top level)"
 
 
-def validate(data: dict, schema_name: str, path: Path) -> None:
-    """Raise one UserError for the first schema violation, naming the key."""
+class PassedChecks:
+    """Keys of checks that passed: `known` from before, `met` by this load (the
+    ones worth keeping: a key of a file since edited is not met again)."""
+
+    def __init__(self, known=()):
+        self.known, self.met = set(known), set()
+
+    def __contains__(self, key: str) -> bool:
+        if key in self.known:
+            self.met.add(key)
+            return True
+        return False
+
+    def add(self, key: str) -> None:
+        self.known.add(key)
+        self.met.add(key)
+
+
+def _passed_key(*material) -> str:
+    text = json.dumps(material, sort_keys=True, separators=(",", ":"), default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def validate(data: dict, schema_name: str, path: Path, passed: PassedChecks | None = None) -> None:
+    """Raise one UserError for the first schema violation, naming the key. `passed`:
+    see the module's docstring."""
+    key = _passed_key("schema", schema(schema_name), data) if passed is not None else None
+    if key is not None and key in passed:
+        return
+    import jsonschema
+
     validator = jsonschema.Draft202012Validator(schema(schema_name))
     errors = sorted(validator.iter_errors(data), key=lambda e: (list(map(str, e.absolute_path)), e.message))
     if not errors:
+        if key is not None:
+            passed.add(key)
         return
     e = errors[0]
     if e.validator == "required":
@@ -136,7 +172,15 @@ class Site:
         return tuple(lv.name for lv in self.levels)
 
 
-def check_crs(code: str, path: Path, key: str) -> None:
+def terrain_model_name(site: Site) -> str:
+    """The terrain package's model name (a scene output and a task's output folder)."""
+    return f"{site.name.lower().replace('-', '_').replace('.', '_')}_terrain"
+
+
+def check_crs(code: str, path: Path, key: str, passed: PassedChecks | None = None) -> None:
+    known = _passed_key("projected crs", code)
+    if passed is not None and known in passed:
+        return
     from pyproj import CRS
     from pyproj.exceptions import CRSError
 
@@ -146,14 +190,16 @@ def check_crs(code: str, path: Path, key: str) -> None:
         raise UserError(path, key, f"unknown CRS {code!r} (no such EPSG code)") from None
     if not crs.is_projected:
         raise UserError(path, key, f"{code} ({crs.name}) is not a projected CRS")
+    if passed is not None:
+        passed.add(known)
 
 
-def load_site(path: Path) -> Site:
+def load_site(path: Path, passed: PassedChecks | None = None) -> Site:
     path = Path(path)
     data = read_toml(path)
-    validate(data, "site", path)
+    validate(data, "site", path, passed)
     data = _defaults(schema("site"), data)
-    check_crs(data["plan"]["crs"], path, "plan.crs")
+    check_crs(data["plan"]["crs"], path, "plan.crs", passed)
 
     names = [lv["name"] for lv in data["levels"]]
     for i, n in enumerate(names):
@@ -242,7 +288,7 @@ class AssetConfig:
 SAFE_ID = r"^[a-z0-9][a-z0-9_]*$"
 
 
-def load_asset_config(path: Path) -> AssetConfig:
+def load_asset_config(path: Path, passed: PassedChecks | None = None) -> AssetConfig:
     import re
 
     path = Path(path)
@@ -250,7 +296,7 @@ def load_asset_config(path: Path) -> AssetConfig:
     if not re.match(SAFE_ID, asset_id):
         raise UserError(path.parent, asset_id, "asset id must be lower-case letters, digits and _")
     data = read_toml(path)
-    validate(data, "asset", path)
+    validate(data, "asset", path, passed)
     data = _defaults(schema("asset"), data)
     for key, value in _numbers(data):
         if not math.isfinite(value):
@@ -279,14 +325,14 @@ def load_asset_config(path: Path) -> AssetConfig:
     )
 
 
-def load_assets(sources: Path) -> tuple[dict[str, AssetConfig], list[UserError]]:
+def load_assets(sources: Path, passed: PassedChecks | None = None) -> tuple[dict[str, AssetConfig], list[UserError]]:
     """Every sources/assets/<id>/asset.toml; broken ones are returned as errors."""
     configs: dict[str, AssetConfig] = {}
     problems: list[UserError] = []
     folder = Path(sources) / "assets"
     for toml in sorted(folder.glob("*/asset.toml")):
         try:
-            cfg = load_asset_config(toml)
+            cfg = load_asset_config(toml, passed)
         except UserError as e:
             problems.append(e)
             continue

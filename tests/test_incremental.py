@@ -210,3 +210,27 @@ def test_floorplan_memo_skips_the_dxf_until_it_changes(tmp_path, monkeypatch):
     monkeypatch.setattr(floorplan, "read_floorplan", real)
     edited = tasks.load_sources(sources, memo=memo).floorplan
     assert [p.x for p in edited.placements] == [p.x + 1.0 for p in first.placements]
+
+
+def test_no_op_plan_skips_the_config_checks_it_passed_before(mini, tmp_path):
+    """The planner keeps the keys of passed checks in the build folder: planning again
+    imports neither jsonschema nor pyproj; edited content is checked again, and a
+    broken edit still gets its one clear error."""
+    sources, _ = mini
+    src = tmp_path / "src"
+    shutil.copytree(sources, src)
+    out = tmp_path / "build"
+    explain(src, out)
+    assert len(json.loads((out / ".checked.json").read_text())) == 1 + 1 + 2  # site schema, CRS, two assets
+    probe = ("import sys; from pathlib import Path; from pipeline.builder.tasks import plan; "
+             f"plan(Path({str(src)!r}), Path({str(out)!r})); "
+             "print(sorted(m for m in ('jsonschema', 'pyproj') if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
+    toml = src / "assets" / "pole" / "asset.toml"
+    toml.write_text(re.sub(r"^category\s*=.*$", "category = 7", toml.read_text(), flags=re.M))  # not a string
+    proc = twin("build", "--sources", src, "--out", out)
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert "asset.toml" in proc.stderr and "category" in proc.stderr
+    assert len(json.loads((out / ".checked.json").read_text())) == 4  # nothing of the bad file kept

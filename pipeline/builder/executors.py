@@ -20,7 +20,7 @@ import os
 import sys
 import time
 import traceback
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -70,6 +70,8 @@ def local_pool(workers: Workers) -> Executor:
     """`workers.count` spawned processes that serve many tasks each (spawned, not
     forked: the scheduler's process holds threads, and Blender does not survive a
     fork of a process that imported it)."""
+    from concurrent.futures import ProcessPoolExecutor  # multiprocessing: only when a task runs
+
     return ProcessPoolExecutor(max_workers=workers.count, mp_context=multiprocessing.get_context("spawn"),
                                initializer=init_worker, initargs=(workers.threads, workers.blender, workers.cpus))
 

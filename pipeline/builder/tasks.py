@@ -193,6 +193,21 @@ def build_asset(staging: Path, asset_toml: str, build: str) -> dict:
             "errors_m": [lod["error_m"] for lod in data["lods"]], "timings": {"write": time.perf_counter() - t}}
 
 
+def build_terrain(staging: Path, sources: str, build: str) -> dict:
+    """Task action: the terrain package (scene.assemble, imported where it runs: a
+    plan needs no pyproj)."""
+    from ..scene.assemble import build_terrain as action
+
+    return action(staging=staging, sources=sources, build=build)
+
+
+def build_scene(staging: Path, sources: str, build: str) -> dict:
+    """Task action: the world in every format (scene.assemble)."""
+    from ..scene.assemble import build_scene as action
+
+    return action(staging=staging, sources=sources, build=build)
+
+
 # --- planning -----------------------------------------------------------------
 
 
@@ -216,16 +231,24 @@ def scenario_assets(sources: Path) -> set[str]:
     return used
 
 
-def load_sources(sources: Path, memo: Path | None = None) -> Plan:
+CHECKS_NAME = ".checked.json"  # in a build folder: config checks that passed (config.py)
+
+
+def load_sources(sources: Path, memo: Path | None = None, checked: Path | None = None) -> Plan:
     """What the sources hold. `memo`: a file where the floor plan read last time is
-    kept with its key, so that a no-op build does not parse the DXF again."""
+    kept with its key, so that a no-op build does not parse the DXF again; `checked`:
+    a file of the config checks that passed, so that it does not check them again."""
     from ..ingest.floorplan import read_floorplan_memo
 
     sources = Path(sources)
-    site = config.load_site(sources / "site.toml")
-    assets, problems = config.load_assets(sources)
+    before = _read_passed(checked)
+    passed = config.PassedChecks(before)
+    site = config.load_site(sources / "site.toml", passed)
+    assets, problems = config.load_assets(sources, passed)
     if problems:
         raise problems[0]
+    if checked is not None and passed.met != before:
+        _write_passed(checked, passed.met)
     plan_path = site.root / site.floorplan
     fp = read_floorplan_memo(plan_path, set(assets), set(site.level_names), memo)
     placed = {p.asset_id for p in fp.placements}
@@ -234,13 +257,37 @@ def load_sources(sources: Path, memo: Path | None = None) -> Plan:
     return Plan(site=site, floorplan=fp, assets=assets, used=used, unused=unused)
 
 
+def _read_passed(path: Path | None) -> set[str]:
+    import json
+
+    if path is None:
+        return set()
+    try:
+        keys = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return set()
+    return {k for k in keys if isinstance(k, str)} if isinstance(keys, list) else set()
+
+
+def _write_passed(path: Path, passed: set[str]) -> None:
+    """The keys this build met, atomically (an edited file's old key goes)."""
+    import json
+    import os
+    import uuid
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.tmp-{uuid.uuid4().hex[:8]}")
+    tmp.write_text(json.dumps(sorted(passed)))
+    os.replace(tmp, path)
+
+
 def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path | None = None) -> Plan:
     """The task graph for a sources folder. `only`: just these assets' packages;
     `cache`: the cache folder the build uses (default: in the build folder)."""
     from ..ingest.floorplan import MEMO_NAME
     from .cache import cache_root
 
-    p = load_sources(sources, memo=Path(build) / MEMO_NAME)
+    p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME)
     wanted = p.used
     if only:
         for a in only:
@@ -298,11 +345,9 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
 def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     """The terrain task (the platform outlines -> its package) and the scene task
     (every placed asset's package and the terrain -> the world in three formats)."""
-    from ..scene.assemble import build_scene, build_terrain, terrain_model_name
-
     code = code_version(*SCENE_CODE)
     site = p.site
-    tname = terrain_model_name(site)
+    tname = config.terrain_model_name(site)
     sources, build = Path(sources).resolve(), Path(build).resolve()
     args = {"sources": str(sources), "build": str(build)}
     inputs = (site.path.resolve(), (site.root / site.floorplan).resolve())

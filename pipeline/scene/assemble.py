@@ -24,8 +24,6 @@ from .terrain import terrain_asset
 SUN_HOUR_UTC = 13  # the built scene's sun: early afternoon on the site's date (Brazil, UTC-3)
 
 
-def terrain_model_name(site: config.Site) -> str:
-    return f"{site.name.lower().replace('-', '_').replace('.', '_')}_terrain"
 
 
 def _load(sources: Path, build: Path | None = None):
@@ -63,7 +61,7 @@ def build_terrain(staging: Path, sources: str, build: str | None = None) -> dict
     from ..export.package import write_package
 
     site, fp, georef = _load(Path(sources), build and Path(build))
-    name = terrain_model_name(site)
+    name = config.terrain_model_name(site)
     asset = terrain_asset(site, list(fp.platforms), georef, name)
     models = Path(staging) / "models"
     models.mkdir(parents=True, exist_ok=True)
@@ -87,7 +85,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     placed = placing.choose_lods(placed, manifests, eyes, site)
     origin = georef.origin_llh
     sun = scene_sun(site, origin)
-    tname = terrain_model_name(site)
+    tname = config.terrain_model_name(site)
     terrain_manifest = manifest.read(models / tname)
 
     out = Path(staging) / "scene"
