@@ -38,3 +38,13 @@ def test_a_killed_write_leaves_a_temporary_file_the_next_build_sweeps(tmp_path):
     (tmp_path / ".tmp-entry").mkdir()
     Cache(tmp_path).clean_tmp()
     assert not list(tmp_path.glob(".tmp-*"))
+
+
+def test_a_memo_whose_folder_is_missing_makes_it_or_stays_empty(tmp_path):
+    memo = ArrayMemo(tmp_path / "not" / "yet", "ns")
+    memo.put("k", {"x": np.arange(2)})
+    assert np.array_equal(memo.get("k")["x"], np.arange(2))
+    (tmp_path / "file").write_text("a file where the folder would be")
+    blocked = ArrayMemo(tmp_path / "file", "ns")
+    blocked.put("k", {"x": np.arange(2)})  # no error: the memo only spares work
+    assert blocked.get("k") is None

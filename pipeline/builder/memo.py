@@ -52,8 +52,12 @@ class ArrayMemo:
         np.savez(buffer, **arrays)
         tmp = self.root / f".tmp-{uuid.uuid4().hex}.npz"
         try:
+            self.root.mkdir(parents=True, exist_ok=True)
             tmp.write_bytes(buffer.getvalue())
             final.parent.mkdir(parents=True, exist_ok=True)
             os.replace(tmp, final)
-        except OSError:  # a read-only or full cache: the memo only spares work
-            tmp.unlink(missing_ok=True)
+        except OSError:  # a read-only, full or misplaced cache: the memo only spares work
+            try:
+                tmp.unlink(missing_ok=True)
+            except OSError:
+                pass
