@@ -315,3 +315,17 @@ def test_a_build_on_a_shared_cache_leaves_another_builds_temporary_entries(tmp_p
             assert (root / ".tmp-being-written").is_dir() and (root / ".tmp-memo.npz").is_file()
     with Cache(root).in_use():
         assert not list(root.glob(".tmp-*"))
+
+
+def test_code_version_follows_the_pinned_libraries(monkeypatch):
+    """A new pin of a geometry library reruns the tasks: its results are theirs."""
+    from pipeline.builder import graph
+
+    pins = graph.pinned_libraries()
+    assert any(p.startswith("meshoptimizer==") for p in pins) and any(p.startswith("bpy==") for p in pins)
+    before = graph.code_version("pipeline.geometry")
+    bumped = [p if not p.startswith("meshoptimizer==") else "meshoptimizer==9.9.9" for p in pins]
+    monkeypatch.setattr(graph, "pinned_libraries", lambda: bumped)
+    assert graph.code_version("pipeline.geometry") != before
+    monkeypatch.setattr(graph, "pinned_libraries", lambda: pins)
+    assert graph.code_version("pipeline.geometry") == before

@@ -15,6 +15,7 @@ import hashlib
 import json
 import os
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable
 
@@ -54,11 +55,14 @@ class FileHasher:
 
 
 def code_version(*modules: str) -> str:
-    """Hash of the source text of the named modules or packages (pipeline.*), so a
-    change to a step's code reruns exactly the tasks that run that step."""
+    """Hash of the source text of the named modules or packages (pipeline.*) and of
+    the pinned libraries they run on (`pinned_libraries`), so a change to a step's
+    code reruns exactly the tasks that run that step, and an upgrade of a library
+    reruns every task."""
     import importlib.util
 
     h = hashlib.sha256()
+    h.update(canonical_json(pinned_libraries()).encode())
     for name in sorted(set(modules)):
         h.update(name.encode())
         spec = importlib.util.find_spec(name)
@@ -71,6 +75,31 @@ def code_version(*modules: str) -> str:
             h.update(str(f.relative_to(origin.parent.parent) if origin.name == "__init__.py" else f.name).encode())
             h.update(f.read_bytes())
     return h.hexdigest()
+
+
+@lru_cache(maxsize=None)
+def pinned_libraries() -> list[str]:
+    """The project's pinned requirements (pyproject.toml beside the package, or the
+    installed package's metadata): what meshoptimizer, fcpw or libigl compute is part
+    of a task's result, so a new pin must not reuse entries made with the old one.
+    A library installed by hand at another version than its pin is not seen (reading
+    every installed version would cost a no-op build 40 ms)."""
+    import tomllib
+
+    pyproject = Path(__file__).resolve().parents[2] / "pyproject.toml"
+    try:
+        project = tomllib.loads(pyproject.read_text())["project"]
+        if project.get("name") == "substation-twin":
+            extras = project.get("optional-dependencies", {})
+            return sorted(project.get("dependencies", []) + extras.get("blender", []))
+    except (OSError, KeyError, ValueError):
+        pass
+    from importlib import metadata
+
+    try:
+        return sorted(metadata.requires("substation-twin") or [])
+    except metadata.PackageNotFoundError:
+        return []
 
 
 @dataclass
