@@ -13,6 +13,7 @@ from pathlib import Path
 
 import click
 
+from .builder.executors import EXECUTORS
 from .errors import UserError
 
 SOURCES = click.option("--sources", type=click.Path(path_type=Path), default=Path("sources"),
@@ -62,13 +63,12 @@ def info(sources: Path):
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder (default: OUT/.cache)")
 @click.option("--explain", is_flag=True, help="say for each task why it ran or was skipped")
 @click.option("--json", "as_json", is_flag=True, help="print the explanation as JSON on stdout")
-@click.option("--executor", type=click.Choice(["local", "in-process"]), default="local", show_default=True,
+@click.option("--executor", type=click.Choice(sorted(EXECUTORS)), default="local", show_default=True,
               help="where tasks run: worker processes, or this one (for a debugger or profiler)")
 @user_errors
 def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cache: Path | None,
           explain: bool, as_json: bool, executor: str):
     """Build the model packages and the scene."""
-    from .builder.executors import EXECUTORS
     from .builder.run import build as run_build
 
     report = run_build(sources, out, jobs=jobs, only=list(only), cache=cache, quiet=as_json,

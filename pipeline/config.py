@@ -12,7 +12,6 @@ checks again on content they already passed.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import tomllib
@@ -21,6 +20,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from .digest import sha256_json
 from .errors import UserError
 
 SCHEMA_DIR = Path(__file__).resolve().parent.parent / "schemas"
@@ -73,15 +73,10 @@ class PassedChecks:
         self.met.add(key)
 
 
-def _passed_key(*material) -> str:
-    text = json.dumps(material, sort_keys=True, separators=(",", ":"), default=repr)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
 def validate(data: dict, schema_name: str, path: Path, passed: PassedChecks | None = None) -> None:
     """Raise one UserError for the first schema violation, naming the key. `passed`:
     see the module's docstring."""
-    key = _passed_key("schema", schema(schema_name), data) if passed is not None else None
+    key = sha256_json(["schema", schema(schema_name), data]) if passed is not None else None
     if key is not None and key in passed:
         return
     import jsonschema
@@ -178,7 +173,7 @@ def terrain_model_name(site: Site) -> str:
 
 
 def check_crs(code: str, path: Path, key: str, passed: PassedChecks | None = None) -> None:
-    known = _passed_key("projected crs", code)
+    known = sha256_json(["projected crs", code])
     if passed is not None and known in passed:
         return
     from pyproj import CRS

@@ -174,10 +174,10 @@ def resave_source(path: Path) -> None:
     """New bytes for the same content, as saving again does: a .blend opened and saved
     by Blender; a binary STL's free-text header rewritten; a comment added to an OBJ."""
     suffix = path.suffix.lower()
+    data = path.read_bytes() if suffix == ".stl" else b""
     if suffix == ".blend":
         nudge_source(path, 0.0)
-    elif suffix == ".stl" and not path.read_bytes()[:5].lower().startswith(b"solid"):
-        data = path.read_bytes()
+    elif suffix == ".stl" and not data[:5].lower().startswith(b"solid"):
         stamp = b"saved again " + bytes(str(time.time_ns()), "ascii")
         path.write_bytes(stamp.ljust(80, b" ")[:80] + data[80:])
     elif suffix == ".obj":

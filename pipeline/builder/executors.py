@@ -15,7 +15,6 @@ scheduler alone moves outputs into the cache and the build folder.
 from __future__ import annotations
 
 import atexit
-import multiprocessing
 import os
 import sys
 import time
@@ -70,7 +69,8 @@ def local_pool(workers: Workers) -> Executor:
     """`workers.count` spawned processes that serve many tasks each (spawned, not
     forked: the scheduler's process holds threads, and Blender does not survive a
     fork of a process that imported it)."""
-    from concurrent.futures import ProcessPoolExecutor  # multiprocessing: only when a task runs
+    import multiprocessing  # only when a task runs: a no-op build and the CLI's options need none
+    from concurrent.futures import ProcessPoolExecutor
 
     return ProcessPoolExecutor(max_workers=workers.count, mp_context=multiprocessing.get_context("spawn"),
                                initializer=init_worker, initargs=(workers.threads, workers.blender, workers.cpus))
@@ -98,6 +98,8 @@ def init_worker(threads: int, blender: bool, cpus: tuple[int, ...] = ()) -> None
     # tenth without it, and the build waits for both. By then the worker has handed
     # back every result (multiprocessing flushes its queues before). Only in a
     # worker: a main process keeps its exit code.
+    import multiprocessing
+
     if multiprocessing.parent_process() is not None:
         atexit.register(_exit_now)
 

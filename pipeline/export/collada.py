@@ -7,7 +7,6 @@ collision) frame, because the SDF <visual><pose> places it. Metres, Z up.
 from __future__ import annotations
 
 import datetime
-import hashlib
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,7 @@ from collada import scene as dae_scene
 from collada import source as dae_source
 
 from pipeline import ir
+from pipeline.digest import sha256_arrays
 from pipeline.errors import UserError
 from pipeline.export import names
 
@@ -49,7 +49,7 @@ def write(asset: ir.Asset, folder: Path) -> list[str]:
         made: dict[str, bytes] = {}  # mesh content -> the visual's document of it
         for level, mesh in enumerate(visual.lods):
             rel = names.mesh_file(link.name, visual.name, level)
-            key = _mesh_key(mesh)
+            key = sha256_arrays(mesh.vertices, mesh.faces, mesh.normals, mesh.uvs)  # what its document holds
             if key not in made:
                 made[key] = _dae_bytes(visual.name, mesh, material)
             _write(folder / rel, made[key])
@@ -60,14 +60,6 @@ def write(asset: ir.Asset, folder: Path) -> list[str]:
             _write(folder / rel, _dae_bytes(col.name, col.mesh, None))
             written.append(rel)
     return sorted(written)
-
-
-def _mesh_key(mesh: ir.Mesh) -> str:
-    """A hash of what the document of a mesh holds (positions, faces, normals, UVs)."""
-    h = hashlib.sha256()
-    for a in (mesh.vertices, mesh.faces, mesh.normals, mesh.uvs):
-        h.update(b"-" if a is None else repr(a.shape).encode() + np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
 
 
 def _material(asset: ir.Asset, visual: ir.Visual) -> ir.Material:

@@ -20,7 +20,6 @@ float32: 10^7 m coordinates would otherwise lose everything below a metre).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import subprocess
@@ -34,6 +33,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from .. import ir
+from ..digest import sha256_arrays, sha256_json
 from ..errors import UserError
 from ..spare import cores_to_spare, spread
 from . import clean as _clean
@@ -685,18 +685,14 @@ class _LevelKeys:
 
     def __init__(self, welded: np.ndarray, welded_faces: np.ndarray, samples: int, iterations: int, budgets,
                  faces: int):
-        h = hashlib.sha256()
-        for a in (np.ascontiguousarray(welded, dtype="<f8"), np.ascontiguousarray(welded_faces, dtype="<i8")):
-            h.update(repr(a.shape).encode())
-            h.update(a.tobytes())
-        h.update(repr((samples, iterations)).encode())
-        self.mesh, self.budgets, self.faces = h.hexdigest(), [float(b) for b in budgets], faces
+        self.mesh = sha256_arrays(welded, welded_faces)
+        self.search = (int(samples), int(iterations))
+        self.budgets, self.faces = [float(b) for b in budgets], faces
 
     def next(self, levels: list[_Level | None]) -> str:
         """The key of the level after `levels`."""
-        i = len(levels)
-        material = (self.mesh, repr(self.budgets[i]), _ceiling_after(levels, self.faces))
-        return hashlib.sha256(repr(material).encode()).hexdigest()
+        budget = self.budgets[len(levels)]
+        return sha256_json([self.mesh, self.search, repr(budget), _ceiling_after(levels, self.faces)])
 
 
 def _level_arrays(level: _Level | None) -> dict[str, np.ndarray]:
