@@ -54,6 +54,40 @@ def test_bad_asset_yields_exactly_its_code(code):
     assert all(f.site.startswith(asset.id) for f in found)
 
 
+@pytest.mark.parametrize("code", sorted(BAD.FIXTURES))
+def test_findings_recalled_from_the_memo_are_the_findings_checked(code, tmp_path):
+    """The per-mesh memo (shared by the geometry and package tasks) gives back what a
+    check finds, at the site it is asked for; a damaged entry is checked again."""
+    from pipeline.builder.memo import ArrayMemo
+
+    asset, kwargs = BAD.FIXTURES[code]()
+    memo = ArrayMemo(tmp_path, "checks-v1")
+    first = check_asset(asset, **kwargs, memo=memo)
+    assert first == check_asset(asset, **kwargs)
+    meshes = sum(len(v.lods) for _, v in asset.visuals()) + sum(len(link.collisions) for link in asset.links)
+    assert memo.hits + memo.puts == meshes and memo.puts > 0  # a repeated mesh is a hit already
+    for entry in (tmp_path / "memo").rglob("*.npz"):  # damaged entries: checked again
+        entry.write_bytes(b"not a zip")
+    assert check_asset(asset, **kwargs, memo=memo) == first
+    again = ArrayMemo(tmp_path, "checks-v1")
+    assert check_asset(asset, **kwargs, memo=again) == first
+    assert (again.hits, again.puts) == (meshes, 0)
+
+
+def test_memo_findings_take_the_site_they_are_asked_for(tmp_path):
+    from pipeline.builder.memo import ArrayMemo
+    from pipeline.validate.checks import mesh_findings
+
+    box = box_mesh()
+    inward = ir.Mesh(box.vertices, box.faces[:, ::-1])  # every face turned over: GEOM005
+    memo = ArrayMemo(tmp_path, "ns")
+    assert [x.site for x in mesh_findings(inward, "a/one", memo=memo)] == ["a/one"]
+    recalled = mesh_findings(inward, "b/two", memo=memo)
+    assert memo.hits == 1 and recalled == mesh_findings(inward, "b/two")
+    assert mesh_findings(inward, "c", collision=True, memo=memo) == mesh_findings(inward, "c", collision=True)
+    assert memo.puts == 2  # a collision mesh is its own entry (it is also checked for holes)
+
+
 @pytest.mark.parametrize("code", PKG_CODES)
 def test_bad_package_yields_exactly_its_code(code):
     found = check_package(DATA / "bad" / code / "crate")

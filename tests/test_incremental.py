@@ -98,6 +98,10 @@ def test_noop_edit_and_parameter_change(mini):
     sdf = (out / "models" / "pole" / "model.sdf").read_text()
     masses = [float(m) for m in re.findall(r"<mass>([^<]+)</mass>", sdf)]
     assert masses and sum(masses) == pytest.approx(175.0)
+    # the package rerun links every COLLADA document its last run made (none changed)
+    state = json.loads((out / ".state.json").read_text())
+    documents = state["tasks"]["asset:pole"]["result"]["collada_documents"]
+    assert documents["made"] == 0 and documents["linked"] > 0
 
     # the source saved again with the same geometry (a comment added): read again, and
     # the LOD search, keyed on what the read made, does not run (the package does: its
@@ -111,6 +115,15 @@ def test_noop_edit_and_parameter_change(mini):
     assert "cut_off_after" not in resaved["geometry:kiosk"]  # its source did not run
     manifest = json.loads((out / "models" / "pole" / "manifest.json").read_text())
     assert manifest["source"]["sha256"] == hashlib.sha256(obj.read_bytes()).hexdigest()
+
+    # after all these edits, what the memos gave (LOD levels, findings, COLLADA
+    # documents) is what a clean build of the same sources makes
+    assert tree_hashes(out) == tree_hashes(_clean_build(sources, root / "clean"))
+
+
+def _clean_build(sources: Path, out: Path) -> Path:
+    explain(sources, out)
+    return out
 
 
 def test_two_clean_builds_are_byte_identical(mini, tmp_path):

@@ -48,3 +48,62 @@ def test_a_memo_whose_folder_is_missing_makes_it_or_stays_empty(tmp_path):
     blocked = ArrayMemo(tmp_path / "file", "ns")
     blocked.put("k", {"x": np.arange(2)})  # no error: the memo only spares work
     assert blocked.get("k") is None
+
+
+def _tree(root):
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_collada_documents_from_the_file_memo_are_the_documents_written(tmp_path):
+    """A package written again with the memo links every document an earlier write
+    kept: the same bytes, no second copy on disk, and a changed mesh made anew."""
+    import dataclasses
+
+    from fixtures_assets import articulated_asset
+    from pipeline import ir
+    from pipeline.builder.memo import FileMemo
+    from pipeline.export import collada
+
+    asset = articulated_asset()
+    plain = collada.write(asset, tmp_path / "plain")
+    memo = FileMemo(tmp_path / "cache", "package-v1")
+    assert collada.write(asset, tmp_path / "first", memo) == plain
+    documents = memo.puts
+    assert memo.hits == 0 and documents > 0
+    again = FileMemo(tmp_path / "cache", "package-v1")
+    assert collada.write(asset, tmp_path / "second", again) == plain
+    assert (again.hits, again.puts) == (len(plain), 0)
+    assert _tree(tmp_path / "plain") == _tree(tmp_path / "first") == _tree(tmp_path / "second")
+    linked = (tmp_path / "second" / plain[0]).stat()
+    assert linked.st_nlink == 3  # the first write's file, the memo's entry and this one: one copy
+    assert FileMemo(tmp_path / "cache", "package-v2").link("any", tmp_path / "x") is False  # new code
+
+    # one visual's mesh moved: its documents are made, every other one linked
+    link = asset.links[0]
+    moved = ir.Mesh(link.visuals[0].mesh.vertices + 0.001, link.visuals[0].mesh.faces)
+    visual = dataclasses.replace(link.visuals[0], lods=(moved, *link.visuals[0].lods[1:]))
+    edited = asset.with_(links=(dataclasses.replace(link, visuals=(visual, *link.visuals[1:])), *asset.links[1:]))
+    third = FileMemo(tmp_path / "cache", "package-v1")
+    collada.write(edited, tmp_path / "third", third)
+    assert third.puts == 1 and third.hits == len(plain) - 1
+    assert _tree(tmp_path / "third") == _tree(collada_written(edited, tmp_path / "plain_edited"))
+
+
+def collada_written(asset, folder):
+    from pipeline.export import collada
+
+    collada.write(asset, folder)
+    return folder
+
+
+def test_a_file_memo_that_cannot_link_keeps_nothing_and_the_files_are_written(tmp_path):
+    from fixtures_assets import articulated_asset
+    from pipeline.builder.memo import FileMemo
+    from pipeline.export import collada
+
+    (tmp_path / "file").write_text("a file where the cache folder would be")
+    memo = FileMemo(tmp_path / "file", "ns")
+    asset = articulated_asset()
+    written = collada.write(asset, tmp_path / "out", memo)
+    assert memo.hits == 0 and _tree(tmp_path / "out") == _tree(collada_written(asset, tmp_path / "plain"))
+    assert len(written) == memo.puts  # each tried, none kept

@@ -35,7 +35,7 @@ def make_build(root: Path) -> Path:
     wrong), and scene/placements.json holding one PLACE004 warning."""
     models = root / "models"
     asset = articulated_asset()
-    outputs, lod_models, _ = write_package(asset, models)
+    outputs, lod_models, _, _ = write_package(asset, models)
     data = manifest.content(asset, source={"file": "x.blend", "sha256": ""}, outputs=outputs, lod_models=lod_models)
     # as the asset task stores them: findings of the source (before cleaning) and built asset
     data["findings"] = {

@@ -39,6 +39,8 @@ GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipelin
                  "pipeline.builder.irfile", "pipeline.builder.tasks")
 PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.digest", "pipeline.validate.checks",
                 "pipeline.builder.irfile", "pipeline.builder.tasks")
+# what the per-mesh checks' memo entries depend on (validate.checks.mesh_findings)
+CHECKS_CODE = ("pipeline.validate.checks", "pipeline.ir", "pipeline.digest")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
               "pipeline.scene", "pipeline.export", "pipeline.digest", "pipeline.geometry.transform")
 # asset.toml keys only the package task reads (the readers get neutral values for them)
@@ -65,15 +67,16 @@ def read_source(cfg: config.AssetConfig) -> ir.Asset:
     return read_mesh(cfg)
 
 
-def asset_steps(cfg: config.AssetConfig, memo=None) -> list[tuple[str, object]]:
+def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:
     """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order.
-    `memo`: where the LOD search keeps its levels between builds (geometry.lod.LevelMemo)."""
+    `memo`: where the LOD search keeps its levels between builds (geometry.lod.LevelMemo);
+    `checked`: where the per-mesh checks keep their findings (validate.checks.mesh_findings)."""
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain
 
     return [
         ("collision", collision_step(CollisionOptions(mode=cfg.collision_mode))),
-        ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m), memo)),
+        ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m), memo, checked)),
     ]
 
 
@@ -135,11 +138,12 @@ def build_source(staging: Path, asset_toml: str) -> dict:
 
 
 def build_geometry(staging: Path, asset_toml: str, build: str, memo: str | None = None,
-                   memo_namespace: str = "") -> dict:
+                   memo_namespace: str = "", checks_namespace: str = "") -> dict:
     """Task action: one asset's cleaned source through the geometry steps, written as
     an .ir file (the source task's findings carried along). `memo`: the cache folder
     whose memo keeps the LOD search's levels (builder.memo), under `memo_namespace`
-    (the task's code version)."""
+    (the task's code version), and the per-mesh checks' findings, under
+    `checks_namespace` (theirs)."""
     from . import irfile
     from .memo import ArrayMemo
 
@@ -147,7 +151,8 @@ def build_geometry(staging: Path, asset_toml: str, build: str, memo: str | None 
     asset, extra = irfile.read(Path(build) / source_path(cfg.id))
     timings = {}
     levels = None if memo is None else ArrayMemo(Path(memo), memo_namespace)
-    for name, step in asset_steps(cfg, levels):
+    checked = None if memo is None else ArrayMemo(Path(memo), checks_namespace)
+    for name, step in asset_steps(cfg, levels, checked):
         t = time.perf_counter()
         asset = step(asset)
         timings[name] = time.perf_counter() - t
@@ -168,29 +173,38 @@ def with_metadata(asset: ir.Asset, cfg: config.AssetConfig) -> ir.Asset:
     return asset.with_(description=cfg.description, category=cfg.category, links=links)
 
 
-def build_asset(staging: Path, asset_toml: str, build: str) -> dict:
-    """Task action: one asset's package from its geometry task's result."""
+def build_asset(staging: Path, asset_toml: str, build: str, memo: str | None = None,
+                memo_namespace: str = "", checks_namespace: str = "") -> dict:
+    """Task action: one asset's package from its geometry task's result. `memo`: the
+    cache folder whose memo holds the COLLADA documents of earlier builds, under
+    `memo_namespace` (the task's code version), and the per-mesh checks' findings
+    (most made by the geometry task's checks of the same meshes), under
+    `checks_namespace`."""
     from ..export import manifest
     from ..export.package import write_package
     from ..validate.checks import Finding, as_dicts, budget_findings, check_asset
     from . import irfile
+    from .memo import ArrayMemo, FileMemo
 
     t = time.perf_counter()
     cfg = config.load_asset_config(Path(asset_toml))
+    documents = None if memo is None else FileMemo(Path(memo), memo_namespace)
+    checked = None if memo is None else ArrayMemo(Path(memo), checks_namespace)
     asset, extra = irfile.read(Path(build) / ir_path(cfg.id))
     asset = with_metadata(asset, cfg)
     source_findings = [Finding.from_dict(d) for d in extra["source_findings"]]
     source_findings += budget_findings(asset.id, extra["source_triangles"], cfg.triangle_budget)
     models = Path(staging) / "models"
     models.mkdir(parents=True, exist_ok=True)
-    outputs, lod_models, built_findings = write_package(asset, models,
-                                                        alongside=lambda: check_asset(asset, cfg.triangle_budget))
+    outputs, lod_models, built_findings, reused = write_package(
+        asset, models, alongside=lambda: check_asset(asset, cfg.triangle_budget, checked), memo=documents)
     source = {"file": cfg.source.name, "sha256": sha256_file(cfg.source), "config_sha256": sha256_file(cfg.path)}
     data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
     data["findings"] = {"source": as_dicts(source_findings), "built": as_dicts(built_findings)}
     manifest.write(data, models / asset.id)
     return {"asset": asset.id, "triangles": [lod["triangles"] for lod in data["lods"]],
-            "errors_m": [lod["error_m"] for lod in data["lods"]], "timings": {"write": time.perf_counter() - t}}
+            "errors_m": [lod["error_m"] for lod in data["lods"]], "timings": {"write": time.perf_counter() - t},
+            **({"collada_documents": reused} if reused else {})}
 
 
 def build_terrain(staging: Path, sources: str, build: str) -> dict:
@@ -296,6 +310,8 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
         wanted = sorted(only)
     source_code = code_version(*SOURCE_CODE)
     geometry_code, package_code = code_version(*GEOMETRY_CODE), code_version(*PACKAGE_CODE)
+    checks_code = code_version(*CHECKS_CODE)
+    memo = str(cache_root(build, cache).resolve())
     for asset_id in wanted:
         cfg = p.assets[asset_id]
         source, toml = cfg.source.resolve(), cfg.path.resolve()
@@ -319,7 +335,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             stage="geometry",
             action=build_geometry,
             args={"asset_toml": str(toml), "build": str(Path(build).resolve()),
-                  "memo": str(cache_root(build, cache).resolve()), "memo_namespace": geometry_code},
+                  "memo": memo, "memo_namespace": geometry_code, "checks_namespace": checks_code},
             deps=(f"source:{asset_id}",),
             params={"asset": asset_id, "asset.toml": geometry_params(cfg)},
             code=geometry_code,
@@ -330,7 +346,8 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             name=f"asset:{asset_id}",
             stage="assets",
             action=build_asset,
-            args={"asset_toml": str(toml), "build": str(Path(build).resolve())},
+            args={"asset_toml": str(toml), "build": str(Path(build).resolve()), "memo": memo,
+                  "memo_namespace": package_code, "checks_namespace": checks_code},
             inputs=(toml, source),
             deps=(f"geometry:{asset_id}",),
             params={"asset": asset_id},

@@ -6,6 +6,7 @@ collision) frame, because the SDF <visual><pose> places it. Metres, Z up.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 from pathlib import Path
 
@@ -20,7 +21,7 @@ from collada import scene as dae_scene
 from collada import source as dae_source
 
 from pipeline import ir
-from pipeline.digest import sha256_arrays
+from pipeline.digest import sha256_arrays, sha256_json
 from pipeline.errors import UserError
 from pipeline.export import names
 
@@ -32,7 +33,7 @@ _TOOL = "substation-twin"
 _FLOAT_TAGS = ("color", "float", "matrix")
 
 
-def write(asset: ir.Asset, folder: Path) -> list[str]:
+def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     """Write every visual LOD and every collision mesh of `asset` under folder/meshes/.
 
     A visual writes as many LODs as it has (names.mesh_file(link, visual, k) for
@@ -40,26 +41,42 @@ def write(asset: ir.Asset, folder: Path) -> list[str]:
     Returns the package-relative paths written, sorted. A level that repeats a finer
     one's mesh (a part kept at a coarser level, a frozen visual: 789 of the sample's
     1964 visual LOD files) gets the finer level's bytes, not a second formatting.
+    `memo` (builder.memo.FileMemo, under the package code's version): documents an
+    earlier build wrote, by what they hold; an edit that leaves a mesh as it was
+    links its document instead of formatting it again.
     """
     folder = Path(folder)
     (folder / "meshes").mkdir(parents=True, exist_ok=True)
     written = []
     for link, visual in asset.visuals():
         material = _material(asset, visual)
-        made: dict[str, bytes] = {}  # mesh content -> the visual's document of it
+        made: dict[str, bytes] = {}  # document key -> the visual's document
         for level, mesh in enumerate(visual.lods):
             rel = names.mesh_file(link.name, visual.name, level)
-            key = sha256_arrays(mesh.vertices, mesh.faces, mesh.normals, mesh.uvs)  # what its document holds
-            if key not in made:
-                made[key] = _dae_bytes(visual.name, mesh, material)
-            _write(folder / rel, made[key])
+            _write_document(folder / rel, visual.name, mesh, material, made, memo)
             written.append(rel)
     for link in asset.links:
         for col in link.collisions:
             rel = names.collision_file(link.name, col.name)
-            _write(folder / rel, _dae_bytes(col.name, col.mesh, None))
+            _write_document(folder / rel, col.name, col.mesh, None, {}, memo)
             written.append(rel)
     return sorted(written)
+
+
+def _write_document(path: Path, node_name: str, mesh: ir.Mesh, material: ir.Material | None,
+                    made: dict[str, bytes], memo) -> None:
+    """path <- the document of one mesh, taken from `made` or `memo` when it was made
+    before (keyed by everything _dae_bytes reads)."""
+    key = sha256_json([node_name, None if material is None else dataclasses.asdict(material),
+                       sha256_arrays(mesh.vertices, mesh.faces, mesh.normals, mesh.uvs)])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if memo is not None and memo.link(key, path):
+        return
+    if key not in made:
+        made[key] = _dae_bytes(node_name, mesh, material)
+    _write(path, made[key])
+    if memo is not None:
+        memo.keep(key, path)
 
 
 def _material(asset: ir.Asset, visual: ir.Visual) -> ir.Material:

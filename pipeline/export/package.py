@@ -17,12 +17,14 @@ from ..spare import beside
 from . import PACKAGE_FORMATS, names, sdf, writer
 
 
-def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object] | None = None
-                  ) -> tuple[dict[str, str], list[str], object]:
+def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object] | None = None,
+                  memo=None) -> tuple[dict[str, str], list[str], object, dict]:
     """Every format of one asset into models/<id>/, LOD variants beside it; the COLLADA
     meshes (the largest share) beside the rest when the worker has a core to spare,
-    and `alongside()` (if given) with the rest. Returns (package-relative path ->
-    sha256, LOD variant model names, what alongside returned)."""
+    and `alongside()` (if given) with the rest. `memo`: the COLLADA documents of
+    earlier builds (collada.write). Returns (package-relative path -> sha256, LOD
+    variant model names, what alongside returned, how many COLLADA documents were
+    linked from the memo and how many made)."""
     folder = inside(models, asset.id)
     folder.mkdir(parents=True, exist_ok=True)
 
@@ -39,9 +41,13 @@ def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object]
             lod_models.append(name)
         return lod_models, alongside() if alongside is not None else None
 
-    (lod_models, extra), _ = beside(the_rest, lambda: writer("collada")(asset, folder))
+    def meshes():
+        writer("collada")(asset, folder, memo)
+        return {"linked": memo.hits, "made": memo.puts} if memo is not None else {}
+
+    (lod_models, extra), documents = beside(the_rest, meshes)
     outputs = {str(p.relative_to(folder)): sha256_file(p) for p in sorted(folder.rglob("*")) if p.is_file()}
-    return outputs, lod_models, extra
+    return outputs, lod_models, extra, documents
 
 
 def inside(root: Path, name: str) -> Path:

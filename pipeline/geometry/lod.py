@@ -793,7 +793,8 @@ def _lod_mesh(mesh: ir.Mesh, r: Simplified) -> ir.Mesh:
     )
 
 
-def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None) -> Callable[[ir.Asset], ir.Asset]:
+def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None,
+              checked: LevelMemo | None = None) -> Callable[[ir.Asset], ir.Asset]:
     """Step: Visual.lods = (authored, LOD1, ..., LODk) and Asset.lods = LodInfo for
     levels 0..k (level 0: the authored meshes, budget and error 0).
 
@@ -805,7 +806,8 @@ def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None)
     visual. A level's error is the measured two-sided Hausdorff distance of the union
     (the largest part's, per visual). Frozen visuals (shape keys, state bindings)
     repeat their Mesh object at every level; a part that would vanish keeps its
-    previous level's mesh, so nothing disappears. `memo`: see simplify_levels.
+    previous level's mesh, so nothing disappears. `memo`: see simplify_levels;
+    `checked`: the memo of the per-part checks (validate.checks.mesh_findings).
     """
     budgets = tuple(float(b) for b in options.budgets_m)
     if list(budgets) != sorted(budgets) or any(b <= 0 for b in budgets):
@@ -828,7 +830,7 @@ def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None)
                     free.append(vis)
             groups = [free] if options.method == "meshoptimizer" else [[v] for v in free]
             for group in (g for g in groups if g):
-                lods, errs = _group_chain(group, budgets, options, linear_scale(link.pose), memo)
+                lods, errs = _group_chain(group, budgets, options, linear_scale(link.pose), memo, checked)
                 chains.update(lods)
                 errors = np.maximum(errors, errs)
             visuals = [replace(v, lods=tuple(chains[v.name])) for v in link.visuals]
@@ -842,7 +844,7 @@ def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None)
 
 
 def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scale: float,
-                 memo: LevelMemo | None = None):
+                 memo: LevelMemo | None = None, checked: LevelMemo | None = None):
     """LOD chains of visuals simplified as one mesh in their link's frame.
     Returns ({visual name: [mesh per level]}, errors per level in the model frame)."""
     poses = [v.pose for v in group]
@@ -873,7 +875,7 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
         for v in group:
             finer = chains[v.name][-1]
             mesh = per_visual.get(v.name)
-            if mesh is None or mesh.triangle_count >= finer.triangle_count or _adds_errors(finer, mesh, known):
+            if mesh is None or mesh.triangle_count >= finer.triangle_count or _adds_errors(finer, mesh, known, checked):
                 # a part never vanishes, collapses flat, or grows at a coarser level: it
                 # keeps its finer level, whose error is within the finer (smaller) budget
                 mesh = finer
@@ -897,17 +899,18 @@ def _split(group: list[ir.Visual], offsets: np.ndarray, r: Simplified) -> dict[s
     return out
 
 
-def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh, known: dict) -> bool:
+def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh, known: dict, checked: LevelMemo | None = None) -> bool:
     """Would the coarser mesh give the validator an error the finer one does not
     have (a cap thinner than the budget collapses into a closed part of no volume), or
     more non-manifold or inconsistently wound edges? The union of a link's visuals is
     judged as a whole while simplifying; this judges each visual on its own.
-    `known` caches each mesh's verdict by id, holding the mesh so the id stays its own."""
+    `known` caches each mesh's verdict by id, holding the mesh so the id stays its own;
+    `checked`: see mesh_findings."""
     from ..validate.checks import edge_defect_counts, mesh_findings
 
     def verdict(mesh):
         if id(mesh) not in known:
-            found = mesh_findings(mesh, "")
+            found = mesh_findings(mesh, "", memo=checked)
             errors = {f.code for f in found if f.severity == "error"}
             edges = edge_defect_counts(mesh) if any(f.code in ("GEOM003", "GEOM004") for f in found) else (0, 0)
             known[id(mesh)] = (mesh, errors, edges)

@@ -65,7 +65,7 @@ def build_terrain(staging: Path, sources: str, build: str | None = None) -> dict
     asset = terrain_asset(site, list(fp.platforms), georef, name)
     models = Path(staging) / "models"
     models.mkdir(parents=True, exist_ok=True)
-    outputs, lod_models, _ = write_package(asset, models)
+    outputs, lod_models, _, _ = write_package(asset, models)
     data = manifest.content(asset, source={"file": site.floorplan, "sha256": ""}, outputs=outputs, lod_models=lod_models)
     manifest.write(data, models / name)
     return {"terrain": name, "triangles": asset.triangle_count(0)}

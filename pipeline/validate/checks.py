@@ -160,9 +160,35 @@ def edge_defect_counts(mesh: ir.Mesh) -> tuple[int, int]:
     return _edge_defects(uses, forward)
 
 
-def mesh_findings(mesh: ir.Mesh, site: str, *, collision: bool = False) -> list[Finding]:
+def mesh_findings(mesh: ir.Mesh, site: str, *, collision: bool = False, memo=None) -> list[Finding]:
     """Geometry checks of one mesh. Topology is judged on positions welded exactly, as
-    an STL's triangle soup means it (unwelded facets are not holes)."""
+    an STL's triangle soup means it (unwelded facets are not holes).
+
+    `memo` (builder.memo.ArrayMemo, under this module's code version): the findings of
+    a mesh checked before, by its content, so the geometry task's per-part checks and
+    the package's checks of the same meshes run once; what comes back is what the
+    check finds (a look-up costs a tenth of a millisecond, checking a small part five
+    times that: every mesh is kept)."""
+    if memo is None:
+        return _mesh_findings(mesh, site, collision)
+    from ..digest import sha256_arrays, sha256_json
+
+    key = sha256_json([sha256_arrays(mesh.vertices, mesh.faces, mesh.normals, mesh.uvs,
+                                     *(k.vertices for k in mesh.shape_keys)), len(mesh.shape_keys), collision])
+    kept = memo.get(key)
+    if kept is not None:
+        try:
+            return [finding(str(code), site, str(message))
+                    for code, message in zip(kept["codes"].tolist(), kept["messages"].tolist(), strict=True)]
+        except (KeyError, ValueError, TypeError, AttributeError):
+            pass  # a damaged entry: checked again below, and replaced
+    found = _mesh_findings(mesh, site, collision)
+    memo.put(key, {"codes": np.array([f.code for f in found], dtype=np.str_),
+                   "messages": np.array([f.message for f in found], dtype=np.str_)})
+    return found
+
+
+def _mesh_findings(mesh: ir.Mesh, site: str, collision: bool) -> list[Finding]:
     verts, faces = mesh.vertices, mesh.faces
     if len(faces) == 0 or len(verts) == 0:
         return [finding("GEOM011", site, "mesh has no triangles")]
@@ -247,7 +273,8 @@ def budget_findings(asset_id: str, triangles: int, budget_triangles: int | None)
     return [finding("GEOM008", asset_id, f"{triangles} triangles at LOD0, budget {budget_triangles}")]
 
 
-def geometry_findings(asset: ir.Asset, budget_triangles: int | None = None) -> list[Finding]:
+def geometry_findings(asset: ir.Asset, budget_triangles: int | None = None, memo=None) -> list[Finding]:
+    """`memo`: see mesh_findings."""
     out: list[Finding] = []
     for link in asset.links:
         lsite = f"{asset.id}/{link.name}"
@@ -258,12 +285,12 @@ def geometry_findings(asset: ir.Asset, budget_triangles: int | None = None) -> l
             if not _finite(visual.pose):
                 out.append(finding("GEOM001", vsite, "visual pose is not finite"))
             for level, mesh in enumerate(visual.lods):
-                out += mesh_findings(mesh, vsite if level == 0 else f"{vsite}/lod{level}")
+                out += mesh_findings(mesh, vsite if level == 0 else f"{vsite}/lod{level}", memo=memo)
         for col in link.collisions:
             csite = f"{lsite}/{col.name}"
             if not _finite(col.pose):
                 out.append(finding("GEOM001", csite, "collision pose is not finite"))
-            out += mesh_findings(col.mesh, csite, collision=True)
+            out += mesh_findings(col.mesh, csite, collision=True, memo=memo)
     for joint in asset.joints:
         if not _finite(joint.pose):
             out.append(finding("GEOM001", f"{asset.id}/{joint.name}", "joint pose is not finite"))
@@ -439,9 +466,10 @@ def hierarchy_findings(asset: ir.Asset) -> list[Finding]:
     return out
 
 
-def check_asset(asset: ir.Asset, budget_triangles: int | None = None) -> list[Finding]:
-    """Geometry and hierarchy findings of an asset, sorted by site then code."""
-    return sort_findings(geometry_findings(asset, budget_triangles) + hierarchy_findings(asset))
+def check_asset(asset: ir.Asset, budget_triangles: int | None = None, memo=None) -> list[Finding]:
+    """Geometry and hierarchy findings of an asset, sorted by site then code. `memo`:
+    see mesh_findings."""
+    return sort_findings(geometry_findings(asset, budget_triangles, memo) + hierarchy_findings(asset))
 
 
 # --- package --------------------------------------------------------------------------
