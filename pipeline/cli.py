@@ -61,18 +61,26 @@ def info(sources: Path):
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=None, help="cores to use: worker processes, and threads of a task running alone (default: all)")
 @click.option("--only", multiple=True, metavar="ASSET", help="build just this asset's package (repeatable)")
 @click.option("--cache", type=click.Path(path_type=Path), default=None, help="cache folder (default: OUT/.cache)")
+@click.option("--cache-limit", default="2G", show_default=True, metavar="SIZE",
+              help="after a build that stored something, drop the least recently used cache entries "
+                   "above this size (e.g. 500M; 0 keeps only this build's; 'none' keeps all)")
 @click.option("--explain", is_flag=True, help="say for each task why it ran or was skipped")
 @click.option("--json", "as_json", is_flag=True, help="print the explanation as JSON on stdout")
 @click.option("--executor", type=click.Choice(sorted(EXECUTORS)), default="local", show_default=True,
               help="where tasks run: worker processes, or this one (for a debugger or profiler)")
 @user_errors
 def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cache: Path | None,
-          explain: bool, as_json: bool, executor: str):
+          cache_limit: str, explain: bool, as_json: bool, executor: str):
     """Build the model packages and the scene."""
+    from .builder.cache import parse_size
     from .builder.run import build as run_build
 
+    try:
+        limit = None if cache_limit.strip().lower() == "none" else parse_size(cache_limit)
+    except ValueError:
+        raise click.BadParameter(f"{cache_limit!r} is not a size (like 500M or 2G)", param_hint="--cache-limit")
     report = run_build(sources, out, jobs=jobs, only=list(only), cache=cache, quiet=as_json,
-                       executor=EXECUTORS[executor])
+                       executor=EXECUTORS[executor], cache_limit=limit)
     # how long each task that ran took in its worker (the build files carry no timings)
     tasks = [{**e, "seconds": round(report.timings[e["task"]], 4)} if e["task"] in report.timings else e
              for e in report.explanations]

@@ -329,3 +329,74 @@ def test_code_version_follows_the_pinned_libraries(monkeypatch):
     assert graph.code_version("pipeline.geometry") != before
     monkeypatch.setattr(graph, "pinned_libraries", lambda: pins)
     assert graph.code_version("pipeline.geometry") == before
+
+
+def _entries(cache: Path) -> set[str]:
+    return {p.parent.name for p in cache.glob("*/*/meta.json")}
+
+
+def test_the_cache_keeps_within_its_limit_dropping_what_was_used_longest_ago(src, tmp_path):
+    """After a build that stored something, the least recently used entries go until
+    the cache is within its limit; the build folder's own entries never do, so the
+    next build has everything it needs, and an undone edit runs again."""
+    out, cache = tmp_path / "build", tmp_path / "build" / ".cache"
+    toy_graph.build(src, out)
+    first = _entries(cache)
+    (src / "a.txt").write_text("alpha, edited")
+    toy_graph.build(src, out, cache_limit=None)  # no limit: both versions kept
+    assert first < _entries(cache)
+    report = toy_graph.build(src, out, sep="-", cache_limit=0)  # a third version, and nothing but it kept
+    kept = _entries(cache)
+    state = __import__("json").loads((out / ".state.json").read_text())
+    assert kept == {e["key"] for e in state["tasks"].values()}
+    assert report.cache["removed"] >= 3 and report.cache["freed"] > 0
+    assert toy_graph.build(src, out, sep="-", cache_limit=0).ran == []  # nothing of its own went
+    again = toy_graph.build(src, out, sep="+", cache_limit=0)  # the joined "+" version was dropped: it runs
+    assert again.ran == ["join"] and (out / "joined.txt").read_text() == "ALPHA, EDITED+BETA"
+
+
+def test_pruning_drops_the_least_recently_used_first_and_counts_linked_files_once(tmp_path):
+    from pipeline.builder.cache import MEMO_FOLDER, Cache
+
+    cache = Cache(tmp_path / "cache")
+    for i, key in enumerate(["aa01", "aa02", "bb03"]):
+        staging = tmp_path / f"staging{i}"
+        staging.mkdir()
+        (staging / "f.bin").write_bytes(b"x" * 1000)
+        cache.put(key, staging, {})
+        os.utime(cache.entry(key) / "meta.json", (1000 + i, 1000 + i))  # used in this order
+    memo = tmp_path / "cache" / MEMO_FOLDER / "ab"
+    memo.mkdir(parents=True)
+    os.link(cache.entry("bb03") / "files" / "f.bin", memo / "linked")  # one file, two names
+    os.utime(memo / "linked", (2000, 2000))
+    items = {str(p.relative_to(tmp_path / "cache")): size for _, size, p, _ in cache._items()}
+    assert items[f"{MEMO_FOLDER}/ab/linked"] == 500  # its half of the linked file
+    cache.restore("aa01", tmp_path / "restored")  # a use: aa01 is now the most recent entry
+    with cache.in_use():  # room for all but one entry: the oldest one not kept goes (aa02 is kept)
+        result = cache.prune(limit=sum(items.values()) - items["bb/bb03"], keep={"aa02"})
+    assert result["removed"] == 1 and not cache.has("bb03")
+    assert cache.has("aa01") and cache.has("aa02") and (memo / "linked").is_file()
+
+
+def test_pruning_waits_for_a_cache_no_other_build_uses(tmp_path):
+    from pipeline.builder.cache import Cache
+
+    staging = tmp_path / "staging"
+    staging.mkdir()
+    (staging / "f.bin").write_bytes(b"x" * 100)
+    Cache(tmp_path / "cache").put("cc01", staging, {})
+    with Cache(tmp_path / "cache").in_use() as other, Cache(tmp_path / "cache").in_use() as this:
+        assert this.prune(limit=0, keep=set()) == {}  # another build may be restoring it
+        assert other.has("cc01")
+    with Cache(tmp_path / "cache").in_use() as alone:
+        assert alone.prune(limit=0, keep=set())["removed"] == 1
+
+
+def test_cache_limit_sizes():
+    from pipeline.builder.cache import parse_size
+
+    assert parse_size("2G") == 2 << 30 and parse_size("500M") == 500 << 20 and parse_size("64kb") == 64 << 10
+    assert parse_size("0") == 0 and parse_size("1.5K") == 1536
+    for bad in ("-1", "five", "inf", "nan", "3X"):
+        with pytest.raises(ValueError):
+            parse_size(bad)

@@ -44,8 +44,9 @@ def tasks(src: Path, build: Path, sep: str = "+", delay: float = 0.0) -> list[Ta
     return [*ups, joined]
 
 
-def build(src: Path, out: Path, sep: str = "+", delay: float = 0.0, jobs: int = 2, cache: Path | None = None):
-    return Scheduler(out, cache=cache, jobs=jobs).run(tasks(src, out, sep, delay))
+def build(src: Path, out: Path, sep: str = "+", delay: float = 0.0, jobs: int = 2, cache: Path | None = None,
+          **scheduler):
+    return Scheduler(out, cache=cache, jobs=jobs, **scheduler).run(tasks(src, out, sep, delay))
 
 
 if __name__ == "__main__":

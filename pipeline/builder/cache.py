@@ -8,6 +8,13 @@ temporary name beside its destination and renames it into place.
 A cache may be shared by builds of several build folders (`--cache DIR`), running at
 once: each holds a shared lock on it while it runs (`in_use`), and only a build that
 finds no other sweeps the temporary entries that killed builds left.
+
+A cache is bounded (`prune`): a build that stored something and finds itself the
+cache's only user removes the least recently used entries and memo files until the
+cache is within its limit (`--cache-limit`), never an entry its own build folder
+holds. Use is recorded as the mtime of an entry's meta.json and of a memo file,
+renewed when either is used, so a CI job that restores the folder keeps what its
+builds still use.
 """
 
 from __future__ import annotations
@@ -24,6 +31,8 @@ from ..digest import sha256_file
 
 CACHE_FOLDER = ".cache"  # in the build folder, unless a build is given another (--cache)
 USERS_FILE = ".users"  # locked shared by every build using the cache
+DEFAULT_LIMIT = 2 << 30  # bytes: the sample's cold build stores about 0.3 GB
+MEMO_FOLDER = "memo"  # where builder.memo keeps its entries
 
 
 def cache_root(build: Path, cache: Path | None = None) -> Path:
@@ -33,6 +42,7 @@ def cache_root(build: Path, cache: Path | None = None) -> Path:
 class Cache:
     def __init__(self, root: Path):
         self.root = Path(root)
+        self._users: int | None = None  # the USERS_FILE descriptor while in use
 
     def entry(self, key: str) -> Path:
         return self.root / key[:2] / key
@@ -66,8 +76,16 @@ class Cache:
             shutil.rmtree(tmp, ignore_errors=True)
         return meta
 
+    def used(self, key: str) -> None:
+        """Record that a build used the entry (the last use decides what `prune` keeps)."""
+        try:
+            os.utime(self.entry(key) / "meta.json")
+        except OSError:
+            pass
+
     def restore(self, key: str, build: Path) -> dict:
         """Place the entry's files into `build`, each by temp-and-rename; returns meta."""
+        self.used(key)
         meta = self.meta(key)
         src_root = self.entry(key) / "files"
         for rel, digest in sorted(meta["files"].items()):
@@ -94,10 +112,70 @@ class Cache:
             except BlockingIOError:
                 pass  # another build is writing here
             fcntl.flock(fd, fcntl.LOCK_SH)
+            self._users = fd
             yield self
         finally:
+            self._users = None
             fcntl.flock(fd, fcntl.LOCK_UN)
             os.close(fd)
+
+    def prune(self, limit: int, keep: set[str]) -> dict:
+        """Remove the least recently used entries and memo files until the cache holds
+        at most `limit` bytes, never the entries `keep` names (the build folder's).
+        Within `in_use`, only when no other build uses the cache (nothing is taken from
+        under a build that is restoring it). Files linked from several places (the
+        memo's COLLADA documents) count a share of their size in each. Returns
+        {"bytes": before, "removed": count, "freed": bytes} (empty when not alone)."""
+        if self._users is not None:
+            try:
+                fcntl.flock(self._users, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return {}
+        try:
+            items = self._items()
+            total = sum(size for _, size, _, _ in items)
+            removed, freed = 0, 0
+            for _, size, path, key in sorted(items):
+                if total - freed <= limit:
+                    break
+                if key in keep:
+                    continue
+                self._remove(path)
+                removed, freed = removed + 1, freed + size
+            return {"bytes": total, "removed": removed, "freed": freed}
+        finally:
+            if self._users is not None:
+                fcntl.flock(self._users, fcntl.LOCK_SH)
+
+    def _items(self) -> list[tuple[float, float, Path, str | None]]:
+        """(last use, bytes, path, entry key or None for a memo file) of everything kept."""
+        items = []
+        for shard in _scan(self.root):
+            if shard.name.startswith(".") or not shard.is_dir(follow_symlinks=False):
+                continue
+            for item in _scan(shard.path):
+                try:
+                    if shard.name == MEMO_FOLDER:
+                        items += [(st.st_mtime, _share(st), Path(path), None) for path, st in _files(item.path)]
+                    elif item.is_dir(follow_symlinks=False):
+                        used = os.stat(os.path.join(item.path, "meta.json")).st_mtime
+                        items.append((used, sum(_share(st) for _, st in _files(item.path)), Path(item.path), item.name))
+                except OSError:
+                    continue  # gone meanwhile, or not an entry (no meta.json)
+        return items
+
+    def _remove(self, path: Path) -> None:
+        """An entry disappears by one rename (a killed prune leaves a whole entry or a
+        temporary folder `clean_tmp` sweeps), a memo file by one unlink."""
+        try:
+            if path.is_dir():
+                tmp = self.root / f".tmp-{uuid.uuid4().hex}"
+                os.replace(path, tmp)
+                shutil.rmtree(tmp, ignore_errors=True)
+            else:
+                path.unlink()
+        except OSError:
+            pass
 
     def clean_tmp(self) -> None:
         """Remove leftovers of killed builds (never complete entries; memo files too)."""
@@ -107,3 +185,36 @@ class Cache:
                     shutil.rmtree(p, ignore_errors=True)
                 else:
                     p.unlink(missing_ok=True)
+
+
+def _scan(path) -> list[os.DirEntry]:
+    try:
+        with os.scandir(path) as it:
+            return sorted(it, key=lambda e: e.name)
+    except OSError:
+        return []
+
+
+def _files(path: str):
+    """(path, stat) of every file under a folder (os.scandir: the cache holds thousands)."""
+    for entry in _scan(path):
+        if entry.is_dir(follow_symlinks=False):
+            yield from _files(entry.path)
+        else:
+            yield entry.path, entry.stat(follow_symlinks=False)
+
+
+def _share(st: os.stat_result) -> float:
+    """A file's share of its bytes: a file linked from n places is paid for once."""
+    return st.st_size / max(1, st.st_nlink)
+
+
+def parse_size(text: str) -> int:
+    """Bytes of "2G", "500M", "64K" or a plain number."""
+    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+    text = text.strip().upper().removesuffix("B")
+    scale = units.get(text[-1:], 1)
+    number = float(text[:-1] if text[-1:] in units else text)
+    if not 0 <= number < float("inf"):
+        raise ValueError(f"not a size: {text!r}")
+    return int(number * scale)

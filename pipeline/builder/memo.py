@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-MEMO_FOLDER = "memo"
+from .cache import MEMO_FOLDER
 
 
 class ArrayMemo:
@@ -46,6 +46,7 @@ class ArrayMemo:
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
             return None
         self.hits += 1
+        _used(self.path(key))
         return arrays
 
     def put(self, key: str, arrays: dict[str, np.ndarray]) -> None:
@@ -92,6 +93,7 @@ class FileMemo:
         except OSError:
             return False
         self.hits += 1
+        _used(self.path(key))
         return True
 
     def keep(self, key: str, written: Path) -> None:
@@ -108,3 +110,11 @@ class FileMemo:
                 tmp.unlink(missing_ok=True)
             except OSError:
                 pass
+
+
+def _used(path: Path) -> None:
+    """An entry's mtime is its last use: the cache's pruning keeps what is used."""
+    try:
+        os.utime(path)
+    except OSError:
+        pass

@@ -8,13 +8,15 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+from .cache import DEFAULT_LIMIT
 from .executors import ExecutorFactory, local_pool
 from .scheduler import BuildReport, Scheduler
 from .tasks import plan
 
 
 def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] | None = None,
-          cache: Path | None = None, quiet: bool = False, executor: ExecutorFactory = local_pool) -> BuildReport:
+          cache: Path | None = None, quiet: bool = False, executor: ExecutorFactory = local_pool,
+          cache_limit: int | None = DEFAULT_LIMIT) -> BuildReport:
     p = plan(Path(sources), Path(out), only=only or None, cache=cache)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -24,8 +26,11 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as progress:
         bars = {s: progress.add_task(s, total=sum(t.stage == s for t in p.tasks)) for s in stages}
         scheduler = Scheduler(out, cache=cache, jobs=jobs, progress=lambda t: progress.advance(bars[t.stage]),
-                              executor=executor)
+                              executor=executor, cache_limit=cache_limit)
         report = scheduler.run(p.tasks)
+    if report.cache.get("removed"):
+        console.print(f"cache: dropped {report.cache['removed']} least recently used entries "
+                      f"({report.cache['freed'] / 2**20:.0f} MB) to stay within {cache_limit / 2**20:.0f} MB")
     if p.unused and not only:
         console.print(f"not built (no placement or scenario uses them): {', '.join(p.unused)}")
     return report

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import UserError
-from .cache import Cache, cache_root
+from .cache import DEFAULT_LIMIT, Cache, cache_root
 from .executors import ExecutorFactory, Workers, local_pool, run_task
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
@@ -40,6 +40,7 @@ class BuildReport:
     results: dict[str, dict] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
     failed: list[tuple[str, str]] = field(default_factory=list)
+    cache: dict = field(default_factory=dict)  # what pruning the cache did (Cache.prune)
 
     @property
     def ran(self) -> list[str]:
@@ -75,10 +76,11 @@ class BuildLock:
 
 class Scheduler:
     def __init__(self, build: Path, cache: Path | None = None, jobs: int | None = None, progress=None,
-                 executor: ExecutorFactory = local_pool):
+                 executor: ExecutorFactory = local_pool, cache_limit: int | None = DEFAULT_LIMIT):
         self.build = Path(build)
         self.executor = executor
         self.cache = Cache(cache_root(self.build, cache))
+        self.cache_limit = cache_limit  # bytes kept after a build that stored something (None: all)
         self.jobs = max(1, jobs or os.cpu_count() or 1)
         # `jobs` is the build's share of the machine: at most that many cores busy, so
         # `--jobs 1` is one core (a shared CI runner's cap), not one worker with threads
@@ -190,6 +192,7 @@ class Scheduler:
                         task.compute_key(hasher, digests, self.build)
                         previous = state["tasks"].get(name)
                         if self._fresh(previous, task.key):
+                            self.cache.used(task.key)
                             why = explain(task, previous, False, digests)
                             renewed = sorted(d for d in task.deps if d in remade)
                             if renewed:  # they reran (or came from the cache) and made the same files
@@ -250,6 +253,8 @@ class Scheduler:
                 state["hashes"] = hasher.memo
                 self._save_state(state)
                 shutil.rmtree(self.build / ".staging", ignore_errors=True)
+            if remade and self.cache_limit is not None:
+                report.cache = self.cache.prune(self.cache_limit, {e["key"] for e in state["tasks"].values()})
         return report
 
     def _finish(self, state: dict, task: Task, digests: dict, meta: dict, report: BuildReport) -> None:
