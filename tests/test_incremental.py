@@ -247,3 +247,17 @@ def test_no_op_plan_skips_the_config_checks_it_passed_before(mini, tmp_path):
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert "asset.toml" in proc.stderr and "category" in proc.stderr
     assert len(json.loads((out / ".checked.json").read_text())) == 4  # nothing of the bad file kept
+
+
+def test_each_task_kind_is_keyed_on_its_own_action_and_not_on_the_planner():
+    """An action's module is in its kind's code version (an edit of it reruns those
+    tasks); the planner is in none (an edit of plan() reruns nothing)."""
+    from pipeline.builder import tasks
+
+    for action, code in ((tasks.build_source, tasks.SOURCE_CODE), (tasks.build_geometry, tasks.GEOMETRY_CODE),
+                         (tasks.build_asset, tasks.PACKAGE_CODE)):
+        assert action.__module__ in code and "pipeline.builder.layout" in code
+        assert "pipeline.builder.tasks" not in code
+        others = {m for m in ("pipeline.builder.source_task", "pipeline.builder.geometry_task",
+                              "pipeline.builder.package_task") if m != action.__module__}
+        assert not others & set(code)

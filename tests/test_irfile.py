@@ -12,7 +12,8 @@ import pytest
 
 from pipeline import config, ir
 from pipeline.builder import irfile
-from pipeline.builder.tasks import asset_steps, read_source
+from pipeline.builder.geometry_task import asset_steps
+from pipeline.builder.source_task import read_source
 from pipeline.errors import UserError
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,18 +1,22 @@
 """The build's tasks: per used asset a source, a geometry and a package task, the
 terrain, the scene.
 
-`plan()` reads the sources and returns the task graph; the actions below run in
-worker processes and write into the staging folder they are given (paths relative
-to build/). An asset's chain is three tasks:
+`plan()` reads the sources and returns the task graph. The actions run in worker
+processes and write into the staging folder they are given (paths relative to
+build/, builder.layout); each kind has its module, whose text is in that kind's
+code version (an edit of the planning here reruns no task). An asset's chain is
+three tasks:
 
-- `source:<id>`: read the source file and clean it -> .source/<id>/<id>.ir (irfile),
-  with the findings on the file as authored. The only task that reads a .blend (so
-  the only one whose worker needs Blender). Its parameters are the asset.toml keys
-  the readers use: none of the metadata, LOD or collision keys below.
-- `geometry:<id>`: the cleaned source -> collision, LOD chain -> .ir/<id>/<id>.ir.
-  The slow part (the LOD search). Its parameters are the [lod] and [collision] keys.
-- `asset:<id>`: the .ir file and asset.toml's metadata -> the package in every format,
-  the manifest and the findings.
+- `source:<id>` (builder.source_task): read the source file and clean it ->
+  .source/<id>/<id>.ir (irfile), with the findings on the file as authored. The
+  only task that reads a .blend (so the only one whose worker needs Blender). Its
+  parameters are the asset.toml keys the readers use: none of the metadata, LOD or
+  collision keys below.
+- `geometry:<id>` (builder.geometry_task): the cleaned source -> collision, LOD
+  chain -> .ir/<id>/<id>.ir. The slow part (the LOD search). Its parameters are the
+  [lod] and [collision] keys.
+- `asset:<id>` (builder.package_task): the .ir file and asset.toml's metadata ->
+  the package in every format, the manifest and the findings.
 
 So editing an asset's description, category, mass or triangle budget rewrites its
 package and leaves its geometry alone; editing an LOD budget reruns the last two and
@@ -21,24 +25,24 @@ reads no source; editing the source reruns all three.
 
 from __future__ import annotations
 
-import dataclasses
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import config, ir
-from ..digest import sha256_file
 from ..errors import UserError
+from .geometry_task import build_geometry
 from .graph import Task, code_version
-from ..spare import beside
+from .layout import IR_FOLDER, SOURCE_FOLDER
+from .package_task import build_asset
+from .source_task import build_source
 
 SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
                "pipeline.ingest.mesh", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.spare",
-               "pipeline.builder.irfile", "pipeline.builder.tasks")
+               "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.source_task")
 GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.validate.checks", "pipeline.spare",
-                 "pipeline.builder.irfile", "pipeline.builder.tasks")
+                 "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.geometry_task")
 PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.digest", "pipeline.validate.checks",
-                "pipeline.builder.irfile", "pipeline.builder.tasks")
+                "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.package_task")
 # what the per-mesh checks' memo entries depend on (validate.checks.mesh_findings)
 CHECKS_CODE = ("pipeline.validate.checks", "pipeline.ir", "pipeline.digest")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
@@ -47,47 +51,9 @@ SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pi
 METADATA_KEYS = ("description", "category", "mass_kg", "triangle_budget")
 # asset.toml tables only the geometry task reads
 GEOMETRY_KEYS = ("lod", "collision")
-SOURCE_FOLDER = ".source"
-IR_FOLDER = ".ir"
 
 
-# --- the asset chain ----------------------------------------------------------
-
-
-def read_source(cfg: config.AssetConfig) -> ir.Asset:
-    """The reader for the source's kind (DESIGN.md s.2), returning ir.Asset."""
-    suffix = cfg.source.suffix.lower()
-    if suffix == ".blend":
-        from ..ingest.blend import read_blend
-        return read_blend(cfg)
-    if suffix in (".step", ".stp"):
-        from ..ingest.cad import read_cad
-        return read_cad(cfg)
-    from ..ingest.mesh import read_mesh
-    return read_mesh(cfg)
-
-
-def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:
-    """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order.
-    `memo`: where the LOD search keeps its levels between builds (geometry.lod.LevelMemo);
-    `checked`: where the per-mesh checks keep their findings (validate.checks.mesh_findings)."""
-    from ..geometry.collision import CollisionOptions, collision_step
-    from ..geometry.lod import LodOptions, lod_chain
-
-    return [
-        ("collision", collision_step(CollisionOptions(mode=cfg.collision_mode))),
-        ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m), memo, checked)),
-    ]
-
-
-def source_path(asset_id: str) -> str:
-    """Where an asset's source task leaves the cleaned source, relative to build/."""
-    return f"{SOURCE_FOLDER}/{asset_id}/{asset_id}.ir"
-
-
-def ir_path(asset_id: str) -> str:
-    """Where an asset's geometry task leaves its result, relative to build/."""
-    return f"{IR_FOLDER}/{asset_id}/{asset_id}.ir"
+# --- the parameters of the asset chain's tasks ---------------------------------
 
 
 def source_params(cfg: config.AssetConfig) -> dict:
@@ -98,113 +64,6 @@ def source_params(cfg: config.AssetConfig) -> dict:
 def geometry_params(cfg: config.AssetConfig) -> dict:
     """The asset.toml settings the geometry steps use (defaults filled in)."""
     return {"collision_mode": cfg.collision_mode, "lod_budgets_m": list(cfg.lod_budgets_m)}
-
-
-def _source_config(cfg: config.AssetConfig) -> config.AssetConfig:
-    """cfg with neutral metadata and geometry settings, so the source task depends on
-    its parameters alone (a mass of 1 kg: the package task scales the links' shares
-    to asset.toml's mass)."""
-    return dataclasses.replace(cfg, description="", category="", mass_kg=1.0, triangle_budget=0,
-                               lod_budgets_m=(), collision_mode="")
-
-
-def build_source(staging: Path, asset_toml: str) -> dict:
-    """Task action: one asset's source file read and cleaned, written as an .ir file
-    with the findings on the file as authored."""
-    from ..geometry.clean import CleanOptions, clean
-    from ..validate.checks import as_dicts, check_asset
-    from . import irfile
-
-    timings = {}
-    t = time.perf_counter()
-    cfg = _source_config(config.load_asset_config(Path(asset_toml)))
-    source = read_source(cfg)
-    timings["read"] = time.perf_counter() - t
-
-    def cleaned():
-        t = time.perf_counter()
-        asset = clean(CleanOptions())(source)
-        timings["clean"] = time.perf_counter() - t
-        return asset
-
-    # the modeller's file as authored, checked beside the clean-up (the triangle
-    # budget is the package task's)
-    asset, source_findings = beside(cleaned, lambda: check_asset(source))
-    out = Path(staging) / source_path(cfg.id)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    irfile.write(out, asset, {"source_findings": as_dicts(source_findings),
-                              "source_triangles": source.triangle_count(0)})
-    return {"asset": cfg.id, "timings": timings}
-
-
-def build_geometry(staging: Path, asset_toml: str, build: str, memo: str | None = None,
-                   memo_namespace: str = "", checks_namespace: str = "") -> dict:
-    """Task action: one asset's cleaned source through the geometry steps, written as
-    an .ir file (the source task's findings carried along). `memo`: the cache folder
-    whose memo keeps the LOD search's levels (builder.memo), under `memo_namespace`
-    (the task's code version), and the per-mesh checks' findings, under
-    `checks_namespace` (theirs)."""
-    from . import irfile
-    from .memo import ArrayMemo
-
-    cfg = config.load_asset_config(Path(asset_toml))
-    asset, extra = irfile.read(Path(build) / source_path(cfg.id))
-    timings = {}
-    levels = None if memo is None else ArrayMemo(Path(memo), memo_namespace)
-    checked = None if memo is None else ArrayMemo(Path(memo), checks_namespace)
-    for name, step in asset_steps(cfg, levels, checked):
-        t = time.perf_counter()
-        asset = step(asset)
-        timings[name] = time.perf_counter() - t
-    out = Path(staging) / ir_path(cfg.id)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    irfile.write(out, asset, extra)
-    reused = {} if levels is None else {"lod_levels": {"recalled": levels.hits, "searched": levels.puts}}
-    return {"asset": cfg.id, "timings": timings, **reused}
-
-
-def with_metadata(asset: ir.Asset, cfg: config.AssetConfig) -> ir.Asset:
-    """asset.toml's description, category and mass on an asset the geometry task made:
-    the links keep their shares of the mass."""
-    total = sum(link.mass for link in asset.links)
-    links = asset.links
-    if total > 0:
-        links = tuple(dataclasses.replace(link, mass=cfg.mass_kg * link.mass / total) for link in links)
-    return asset.with_(description=cfg.description, category=cfg.category, links=links)
-
-
-def build_asset(staging: Path, asset_toml: str, build: str, memo: str | None = None,
-                memo_namespace: str = "", checks_namespace: str = "") -> dict:
-    """Task action: one asset's package from its geometry task's result. `memo`: the
-    cache folder whose memo holds the COLLADA documents of earlier builds, under
-    `memo_namespace` (the task's code version), and the per-mesh checks' findings
-    (most made by the geometry task's checks of the same meshes), under
-    `checks_namespace`."""
-    from ..export import manifest
-    from ..export.package import write_package
-    from ..validate.checks import Finding, as_dicts, budget_findings, check_asset
-    from . import irfile
-    from .memo import ArrayMemo, FileMemo
-
-    t = time.perf_counter()
-    cfg = config.load_asset_config(Path(asset_toml))
-    documents = None if memo is None else FileMemo(Path(memo), memo_namespace)
-    checked = None if memo is None else ArrayMemo(Path(memo), checks_namespace)
-    asset, extra = irfile.read(Path(build) / ir_path(cfg.id))
-    asset = with_metadata(asset, cfg)
-    source_findings = [Finding.from_dict(d) for d in extra["source_findings"]]
-    source_findings += budget_findings(asset.id, extra["source_triangles"], cfg.triangle_budget)
-    models = Path(staging) / "models"
-    models.mkdir(parents=True, exist_ok=True)
-    outputs, lod_models, built_findings, reused = write_package(
-        asset, models, alongside=lambda: check_asset(asset, cfg.triangle_budget, checked), memo=documents)
-    source = {"file": cfg.source.name, "sha256": sha256_file(cfg.source), "config_sha256": sha256_file(cfg.path)}
-    data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
-    data["findings"] = {"source": as_dicts(source_findings), "built": as_dicts(built_findings)}
-    manifest.write(data, models / asset.id)
-    return {"asset": asset.id, "triangles": [lod["triangles"] for lod in data["lods"]],
-            "errors_m": [lod["error_m"] for lod in data["lods"]], "timings": {"write": time.perf_counter() - t},
-            **({"collada_documents": reused} if reused else {})}
 
 
 def build_terrain(staging: Path, sources: str, build: str) -> dict:
