@@ -13,15 +13,16 @@ from typing import Callable
 from .. import ir
 from ..digest import sha256_file
 from ..errors import UserError
-from ..spare import beside
+from ..spare import spread
 from . import PACKAGE_FORMATS, names, sdf, writer
 
 
 def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object] | None = None,
                   memo=None) -> tuple[dict[str, str], list[str], object, dict]:
-    """Every format of one asset into models/<id>/, LOD variants beside it; the COLLADA
-    meshes (the largest share) beside the rest when the worker has a core to spare,
-    and `alongside()` (if given) with the rest. `memo`: the COLLADA documents of
+    """Every format of one asset into models/<id>/, LOD variants beside it, and
+    `alongside()` (if given) with them. When the worker has a core to spare, in three
+    parts side by side: the COLLADA meshes (the largest share in a cold build), the
+    glTF with the thumbnail, and the rest here. `memo`: the COLLADA documents of
     earlier builds (collada.write). Returns (package-relative path -> sha256, LOD
     variant model names, what alongside returned, how many COLLADA documents were
     linked from the memo and how many made)."""
@@ -30,7 +31,7 @@ def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object]
 
     def the_rest():
         for fmt in PACKAGE_FORMATS:
-            if fmt != "collada":
+            if fmt not in ("collada", "gltf", "thumbnail"):
                 writer(fmt)(asset, folder)
         lod_models = []
         for level in range(1, asset.lod_count):
@@ -41,11 +42,14 @@ def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object]
             lod_models.append(name)
         return lod_models, alongside() if alongside is not None else None
 
+    def gltf_and_thumbnail():
+        return [writer(fmt)(asset, folder) for fmt in ("gltf", "thumbnail")]
+
     def meshes():
         writer("collada")(asset, folder, memo)
         return {"linked": memo.hits, "made": memo.puts} if memo is not None else {}
 
-    (lod_models, extra), documents = beside(the_rest, meshes)
+    (lod_models, extra), _, documents = spread([the_rest, gltf_and_thumbnail, meshes])
     outputs = {str(p.relative_to(folder)): sha256_file(p) for p in sorted(folder.rglob("*")) if p.is_file()}
     return outputs, lod_models, extra, documents
 
