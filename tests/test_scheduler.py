@@ -272,6 +272,17 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
             os.environ[SHARE_VARIABLE]) == ("3", "3", "1", "3")
 
 
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs two CPUs")
+def test_a_task_that_starts_alone_gets_every_core(src, tmp_path):
+    """A cold build splits the cores between the tasks that start together; the last
+    task, with nothing beside it, is given them all for its side-by-side parts."""
+    report = toy_graph.build(src, tmp_path / "build", jobs=2)
+    assert [report.results[n]["cores"] for n in ("upper:a", "upper:b", "join")] == ["1", "1", "2"]
+    (src / "b.txt").write_text("beta, edited")  # an edit: its one chain runs task by task, each alone
+    report = toy_graph.build(src, tmp_path / "build", jobs=2)
+    assert [report.results[n]["cores"] for n in ("upper:b", "join")] == ["2", "2"]
+
+
 def _affinity() -> list[int]:
     return sorted(os.sched_getaffinity(0))
 

@@ -6,12 +6,14 @@ sources/a.txt, sources/b.txt -> upper:a, upper:b (copy upper-cased, slowly if as
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
 
 from pipeline.builder.graph import Task
 from pipeline.builder.scheduler import Scheduler
+from pipeline.spare import SHARE_VARIABLE
 
 
 def upper(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:
@@ -24,14 +26,14 @@ def upper(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:
             f.flush()
             if delay:
                 time.sleep(delay)
-    return {"chars": len(text)}
+    return {"chars": len(text), "cores": os.environ.get(SHARE_VARIABLE)}
 
 
 def join(staging: Path, build: str, sep: str) -> dict:
     parts = [(Path(build) / "up" / f"{n}.txt").read_text() for n in ("a", "b")]
     out = staging / "joined.txt"
     out.write_text(sep.join(parts))
-    return {"parts": 2}
+    return {"parts": 2, "cores": os.environ.get(SHARE_VARIABLE)}
 
 
 def tasks(src: Path, build: Path, sep: str = "+", delay: float = 0.0) -> list[Task]:

@@ -1,5 +1,5 @@
 """Where tasks run. The scheduler decides what runs and when; an executor only runs
-`run_task(action, args, staging)` calls and hands back `concurrent.futures` futures.
+`run_task(action, args, staging, cores)` calls and hands back `concurrent.futures` futures.
 
 An executor is a factory `Workers -> concurrent.futures.Executor`, called once per
 build when the first task has to run (a no-op build starts none). Tasks are pure
@@ -49,9 +49,15 @@ class Workers:
 ExecutorFactory = Callable[[Workers], Executor]
 
 
-def run_task(action, args: dict, staging: str) -> dict:
+def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict:
     """One task, wherever it runs. User errors come back as data so the scheduler
-    reports them; a bug keeps its trace for the report, not the user's screen."""
+    reports them; a bug keeps its trace for the report, not the user's screen.
+    `cores`: the task's share of the cores for spare.beside and spread, which the
+    scheduler gives when it submits the task (all of the build's to a task that
+    starts with nothing beside it, the scene at the end of a cold build)."""
+    before = os.environ.get(SHARE_VARIABLE)
+    if cores is not None:
+        os.environ[SHARE_VARIABLE] = str(cores)
     try:
         t0 = time.perf_counter()
         result = action(staging=Path(staging), **args) or {}
@@ -60,6 +66,11 @@ def run_task(action, args: dict, staging: str) -> dict:
         return {"ok": False, "user_error": str(e)}
     except Exception as e:
         return {"ok": False, "error": f"{type(e).__name__}: {e}", "trace": traceback.format_exc()}
+    finally:
+        if before is None:
+            os.environ.pop(SHARE_VARIABLE, None)
+        else:
+            os.environ[SHARE_VARIABLE] = before
 
 
 # --- a local pool of spawned processes (the default) ---------------------------
@@ -117,7 +128,8 @@ class InProcess(Executor):
     """Runs each task in the calling process when it is submitted, one at a time:
     breakpoints, profilers and tracebacks see the task's own stack. Nothing is set up
     (the process keeps its environment, bpy is imported by the first reader that
-    needs it), so a task gets one core unless the caller's environment says more."""
+    needs it); each task has the share of the cores the scheduler gives it for the
+    duration of its run."""
 
     def submit(self, fn, /, *args, **kwargs) -> Future:
         future: Future = Future()

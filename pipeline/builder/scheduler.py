@@ -220,7 +220,11 @@ class Scheduler:
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)
                         report.explanations.append(explain(task, previous, False, digests))
-                        running[pool.submit(run_task, task.action, task.args, str(staging))] = task
+                        # a task that starts with nothing running or waiting beside it
+                        # gets every core (what becomes ready later shares them)
+                        alone = not running and not any(t.name in pending for t in ready if t is not task)
+                        cores = self.cores if alone else threads
+                        running[pool.submit(run_task, task.action, task.args, str(staging), cores)] = task
                     if not running:
                         if pending:  # everything left waits on a failed task
                             continue
