@@ -14,6 +14,7 @@ Nothing here does I/O; arrays are never mutated after construction.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -86,6 +87,15 @@ class Mesh:
     @property
     def triangle_count(self) -> int:
         return int(len(self.faces))
+
+    @cached_property
+    def digest(self) -> str:
+        """sha256 of everything the mesh holds (its arrays never change): the one key
+        by which the memos know a mesh (checks' findings, COLLADA documents)."""
+        from .digest import sha256_arrays
+
+        return sha256_arrays(self.vertices, self.faces, self.normals, self.uvs,
+                             *(k.vertices for k in self.shape_keys))
 
     def bounds(self) -> np.ndarray:
         """(2, 3) float64: min and max corner; zeros for an empty mesh."""

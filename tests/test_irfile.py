@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fixtures_assets import articulated_asset, box_mesh
 from pipeline import config, ir
 from pipeline.builder import irfile
 from pipeline.builder.geometry_task import asset_steps
@@ -94,3 +95,19 @@ def test_a_tampered_file_is_refused_without_running_anything(shunt_reactor, tmp_
     path.write_bytes(data)
     with pytest.raises(UserError, match="bad.ir"):
         irfile.read(path)
+
+
+def test_mesh_digest_follows_content_not_identity(tmp_path):
+    """The memos know a mesh by `Mesh.digest`: the same arrays give the same digest,
+    also as read back from an .ir file; any array changed, another one."""
+    box = box_mesh(attributes=True)
+    twin = ir.Mesh(box.vertices.copy(), box.faces.copy(), box.normals.copy(), box.uvs.copy())
+    assert twin.digest == box.digest
+    assert ir.Mesh(box.vertices + 1e-9, box.faces, box.normals, box.uvs).digest != box.digest
+    assert ir.Mesh(box.vertices, box.faces, None, box.uvs).digest != box.digest
+    keyed = ir.Mesh(box.vertices, box.faces, box.normals, box.uvs, (ir.ShapeKey("open", box.vertices * 2),))
+    assert keyed.digest != box.digest
+    asset = articulated_asset()
+    irfile.write(tmp_path / "a.ir", asset)
+    back, _ = irfile.read(tmp_path / "a.ir")
+    assert [v.mesh.digest for _, v in back.visuals()] == [v.mesh.digest for _, v in asset.visuals()]

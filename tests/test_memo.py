@@ -1,4 +1,4 @@
-"""The builder's array memo: exact round trips, misses for anything unreadable."""
+"""The builder's memos: exact round trips, misses for anything unreadable, linked files."""
 
 import numpy as np
 
@@ -54,6 +54,13 @@ def _tree(root):
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
 
 
+def _collada_written(asset, folder):
+    from pipeline.export import collada
+
+    collada.write(asset, folder)
+    return folder
+
+
 def test_collada_documents_from_the_file_memo_are_the_documents_written(tmp_path):
     """A package written again with the memo links every document an earlier write
     kept: the same bytes, no second copy on disk, and a changed mesh made anew."""
@@ -86,14 +93,7 @@ def test_collada_documents_from_the_file_memo_are_the_documents_written(tmp_path
     third = FileMemo(tmp_path / "cache", "package-v1")
     collada.write(edited, tmp_path / "third", third)
     assert third.puts == 1 and third.hits == len(plain) - 1
-    assert _tree(tmp_path / "third") == _tree(collada_written(edited, tmp_path / "plain_edited"))
-
-
-def collada_written(asset, folder):
-    from pipeline.export import collada
-
-    collada.write(asset, folder)
-    return folder
+    assert _tree(tmp_path / "third") == _tree(_collada_written(edited, tmp_path / "plain_edited"))
 
 
 def test_a_file_memo_that_cannot_link_keeps_nothing_and_the_files_are_written(tmp_path):
@@ -105,5 +105,5 @@ def test_a_file_memo_that_cannot_link_keeps_nothing_and_the_files_are_written(tm
     memo = FileMemo(tmp_path / "file", "ns")
     asset = articulated_asset()
     written = collada.write(asset, tmp_path / "out", memo)
-    assert memo.hits == 0 and _tree(tmp_path / "out") == _tree(collada_written(asset, tmp_path / "plain"))
+    assert memo.hits == 0 and _tree(tmp_path / "out") == _tree(_collada_written(asset, tmp_path / "plain"))
     assert len(written) == memo.puts  # each tried, none kept

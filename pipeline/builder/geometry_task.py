@@ -12,7 +12,7 @@ from .layout import ir_path, source_path
 
 def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:
     """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order.
-    `memo`: where the LOD search keeps its levels between builds (geometry.lod.LevelMemo);
+    `memo`: where the LOD search keeps its levels between builds (geometry.lod.Memo);
     `checked`: where the per-mesh checks keep their findings (validate.checks.mesh_findings)."""
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain

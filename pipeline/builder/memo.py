@@ -22,59 +22,18 @@ import os
 import uuid
 import zipfile
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from .cache import MEMO_FOLDER
 
 
-class ArrayMemo:
-    def __init__(self, cache_root: Path, namespace: str):
-        self.root = Path(cache_root)
-        self.namespace = namespace
-        self.hits = self.puts = 0  # reported by the task: what it reused, what it computed
+class _Memo:
+    """Entries under the hash of (namespace, key), counted: what a task reports as
+    reused (hits) and computed (puts)."""
 
-    def path(self, key: str) -> Path:
-        name = hashlib.sha256(f"{self.namespace}\0{key}".encode()).hexdigest()
-        return self.root / MEMO_FOLDER / name[:2] / f"{name}.npz"
-
-    def get(self, key: str) -> dict[str, np.ndarray] | None:
-        try:
-            data = self.path(key).read_bytes()
-            with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-                arrays = {name: npz[name] for name in npz.files}
-        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
-            return None
-        self.hits += 1
-        _used(self.path(key))
-        return arrays
-
-    def put(self, key: str, arrays: dict[str, np.ndarray]) -> None:
-        self.puts += 1
-        final = self.path(key)
-        buffer = io.BytesIO()
-        np.savez(buffer, **arrays)
-        tmp = self.root / f".tmp-{uuid.uuid4().hex}.npz"
-        try:
-            self.root.mkdir(parents=True, exist_ok=True)
-            tmp.write_bytes(buffer.getvalue())
-            final.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(tmp, final)
-        except OSError:  # a read-only, full or misplaced cache: the memo only spares work
-            try:
-                tmp.unlink(missing_ok=True)
-            except OSError:
-                pass
-
-
-class FileMemo:
-    """Files a step wrote, by content key: a step about to write the same bytes again
-    links the kept file into place instead of making it. Entries are hard links to
-    the files as written, so they take no room of their own (the cache entry that
-    got the written file shares it) and stay whole when that entry goes. Nothing
-    writes into a kept file: staged files are moved into the cache, which copies
-    them out to the build folder. Where a link cannot be made (a cache on another
-    filesystem than the build folder), nothing is kept and every file is written."""
+    suffix = ""
 
     def __init__(self, cache_root: Path, namespace: str):
         self.root = Path(cache_root)
@@ -83,33 +42,70 @@ class FileMemo:
 
     def path(self, key: str) -> Path:
         name = hashlib.sha256(f"{self.namespace}\0{key}".encode()).hexdigest()
-        return self.root / MEMO_FOLDER / name[:2] / name
+        return self.root / MEMO_FOLDER / name[:2] / f"{name}{self.suffix}"
+
+    def _place(self, final: Path, make: Callable[[Path], None]) -> None:
+        """final <- what `make(tmp)` makes at a temporary name in the cache's root;
+        nothing when the cache cannot be written (read-only, full, another
+        filesystem, a file in its place): the memo only spares work."""
+        tmp = self.root / f".tmp-{uuid.uuid4().hex}{self.suffix}"
+        try:
+            final.parent.mkdir(parents=True, exist_ok=True)
+            make(tmp)
+            os.replace(tmp, final)
+        except OSError:
+            try:
+                tmp.unlink(missing_ok=True)
+            except OSError:
+                pass
+
+
+class ArrayMemo(_Memo):
+    suffix = ".npz"
+
+    def get(self, key: str) -> dict[str, np.ndarray] | None:
+        path = self.path(key)
+        try:
+            with np.load(io.BytesIO(path.read_bytes()), allow_pickle=False) as npz:
+                arrays = {name: npz[name] for name in npz.files}
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+            return None
+        self.hits += 1
+        _used(path)
+        return arrays
+
+    def put(self, key: str, arrays: dict[str, np.ndarray]) -> None:
+        self.puts += 1
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        self._place(self.path(key), lambda tmp: tmp.write_bytes(buffer.getvalue()))
+
+
+class FileMemo(_Memo):
+    """Files a step wrote, by content key: a step about to write the same bytes again
+    links the kept file into place instead of making it. Entries are hard links to
+    the files as written, so they take no room of their own (the cache entry that
+    got the written file shares it) and stay whole when that entry goes. Nothing
+    writes into a kept file: staged files are moved into the cache, which copies
+    them out to the build folder. Where a link cannot be made (a cache on another
+    filesystem than the build folder), nothing is kept and every file is written."""
 
     def link(self, key: str, dest: Path) -> bool:
         """Make `dest` (which must not exist) the file kept under `key`; False when
         none is kept (or it cannot be linked there), and the caller writes it."""
+        path = self.path(key)
         try:
-            os.link(self.path(key), dest)
+            os.link(path, dest)
         except OSError:
             return False
         self.hits += 1
-        _used(self.path(key))
+        _used(path)
         return True
 
     def keep(self, key: str, written: Path) -> None:
         """Keep the complete file `written` under `key`."""
         self.puts += 1
-        final = self.path(key)
-        tmp = self.root / f".tmp-{uuid.uuid4().hex}"
-        try:
-            final.parent.mkdir(parents=True, exist_ok=True)
-            os.link(written, tmp)
-            os.replace(tmp, final)
-        except OSError:  # another filesystem, a read-only or full cache: nothing kept
-            try:
-                tmp.unlink(missing_ok=True)
-            except OSError:
-                pass
+        self._place(self.path(key), lambda tmp: os.link(written, tmp))
 
 
 def _used(path: Path) -> None:

@@ -21,7 +21,7 @@ from collada import scene as dae_scene
 from collada import source as dae_source
 
 from pipeline import ir
-from pipeline.digest import sha256_arrays, sha256_json
+from pipeline.digest import sha256_json
 from pipeline.errors import UserError
 from pipeline.export import names
 
@@ -67,14 +67,13 @@ def _write_document(path: Path, node_name: str, mesh: ir.Mesh, material: ir.Mate
                     made: dict[str, bytes], memo) -> None:
     """path <- the document of one mesh, taken from `made` or `memo` when it was made
     before (keyed by everything _dae_bytes reads)."""
-    key = sha256_json([node_name, None if material is None else dataclasses.asdict(material),
-                       sha256_arrays(mesh.vertices, mesh.faces, mesh.normals, mesh.uvs)])
+    key = sha256_json([node_name, None if material is None else dataclasses.asdict(material), mesh.digest])
     path.parent.mkdir(parents=True, exist_ok=True)
     if memo is not None and memo.link(key, path):
         return
     if key not in made:
         made[key] = _dae_bytes(node_name, mesh, material)
-    _write(path, made[key])
+    path.write_bytes(made[key])
     if memo is not None:
         memo.keep(key, path)
 
@@ -93,11 +92,6 @@ def _dae_bytes(node_name: str, mesh: ir.Mesh, material: ir.Material | None) -> b
     root = doc.xmlnode.getroot()
     _reformat_floats(root, arrays)
     return etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
-
-
-def _write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(data)
 
 
 def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):

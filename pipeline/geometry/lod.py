@@ -587,9 +587,10 @@ def simplify_checked(vertices: np.ndarray, faces: np.ndarray, budget_m: float, m
     return simplify_levels(vertices, faces, (budget_m,), method, iterations, samples, normals, parts)[0]
 
 
-class LevelMemo(Protocol):
-    """Where searched levels are kept between runs, by key (builder.memo.ArrayMemo):
-    arrays in, the same arrays out, or None for a key it does not hold."""
+class Memo(Protocol):
+    """Where results are kept between runs, by key (builder.memo.ArrayMemo): arrays
+    in, the same arrays out, or None for a key it does not hold. The LOD search keeps
+    its levels in one, the per-part checks their findings in another."""
 
     def get(self, key: str) -> dict[str, np.ndarray] | None: ...
 
@@ -598,7 +599,7 @@ class LevelMemo(Protocol):
 
 def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: str = "meshoptimizer",
                     iterations: int = ITERATIONS, samples: int = MEASURE_SAMPLES, normals: np.ndarray | None = None,
-                    parts: np.ndarray | None = None, memo: LevelMemo | None = None) -> list[Simplified]:
+                    parts: np.ndarray | None = None, memo: Memo | None = None) -> list[Simplified]:
     """The coarsest checked simplification of a CLEAN mesh within each of the
     ascending `budgets_m` (metres), one per budget, each no finer than the one before.
 
@@ -704,7 +705,7 @@ def _level_arrays(level: _Level | None) -> dict[str, np.ndarray]:
             "counts": np.array([level.flipped, level.non_manifold_added], dtype=np.int64)}
 
 
-def _recall(memo: LevelMemo, keys: _LevelKeys, n_welded: int) -> list[_Level | None]:
+def _recall(memo: Memo, keys: _LevelKeys, n_welded: int) -> list[_Level | None]:
     """The leading levels the memo holds, in order; stops at the first it lacks (a
     damaged entry counts as lacking: it is searched again and replaced)."""
     levels: list[_Level | None] = []
@@ -793,8 +794,8 @@ def _lod_mesh(mesh: ir.Mesh, r: Simplified) -> ir.Mesh:
     )
 
 
-def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None,
-              checked: LevelMemo | None = None) -> Callable[[ir.Asset], ir.Asset]:
+def lod_chain(options: LodOptions = LodOptions(), memo: Memo | None = None,
+              checked: Memo | None = None) -> Callable[[ir.Asset], ir.Asset]:
     """Step: Visual.lods = (authored, LOD1, ..., LODk) and Asset.lods = LodInfo for
     levels 0..k (level 0: the authored meshes, budget and error 0).
 
@@ -844,7 +845,7 @@ def lod_chain(options: LodOptions = LodOptions(), memo: LevelMemo | None = None,
 
 
 def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scale: float,
-                 memo: LevelMemo | None = None, checked: LevelMemo | None = None):
+                 memo: Memo | None = None, checked: Memo | None = None):
     """LOD chains of visuals simplified as one mesh in their link's frame.
     Returns ({visual name: [mesh per level]}, errors per level in the model frame)."""
     poses = [v.pose for v in group]
@@ -859,7 +860,7 @@ def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scal
     scale = max(link_scale, 1e-12)
     chains = {v.name: [v.mesh] for v in group}
     errors = np.zeros(len(budgets))
-    known: dict = {}  # id(mesh) -> (mesh, its validator error codes)
+    known: dict = {}  # id(mesh) -> (mesh, its validator error codes, its edge defect counts)
     levels = simplify_levels(vertices, faces, [b / scale for b in budgets], options.method, options.iterations,
                              options.samples, normals=normals, parts=parts_id, memo=memo)
     for i, r in enumerate(levels):
@@ -899,7 +900,7 @@ def _split(group: list[ir.Visual], offsets: np.ndarray, r: Simplified) -> dict[s
     return out
 
 
-def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh, known: dict, checked: LevelMemo | None = None) -> bool:
+def _adds_errors(finer: ir.Mesh, coarser: ir.Mesh, known: dict, checked: Memo | None = None) -> bool:
     """Would the coarser mesh give the validator an error the finer one does not
     have (a cap thinner than the budget collapses into a closed part of no volume), or
     more non-manifold or inconsistently wound edges? The union of a link's visuals is

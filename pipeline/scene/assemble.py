@@ -24,8 +24,6 @@ from .terrain import terrain_asset
 SUN_HOUR_UTC = 13  # the built scene's sun: early afternoon on the site's date (Brazil, UTC-3)
 
 
-
-
 def _load(sources: Path, build: Path | None = None):
     from ..georef import Georeferencer, default_origin
     from ..ingest.floorplan import MEMO_NAME, read_floorplan_memo

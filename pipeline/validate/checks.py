@@ -171,10 +171,7 @@ def mesh_findings(mesh: ir.Mesh, site: str, *, collision: bool = False, memo=Non
     times that: every mesh is kept)."""
     if memo is None:
         return _mesh_findings(mesh, site, collision)
-    from ..digest import sha256_arrays, sha256_json
-
-    key = sha256_json([sha256_arrays(mesh.vertices, mesh.faces, mesh.normals, mesh.uvs,
-                                     *(k.vertices for k in mesh.shape_keys)), len(mesh.shape_keys), collision])
+    key = f"{mesh.digest}:{'collision' if collision else 'visual'}"
     kept = memo.get(key)
     if kept is not None:
         try:
