@@ -1,5 +1,6 @@
 """The scheduler on a toy graph: incremental, cached, locked, kill-safe."""
 
+import json
 import os
 import shutil
 import signal
@@ -358,7 +359,7 @@ def test_the_cache_keeps_within_its_limit_dropping_what_was_used_longest_ago(src
     assert first < _entries(cache)
     report = toy_graph.build(src, out, sep="-", cache_limit=0)  # a third version, and nothing but it kept
     kept = _entries(cache)
-    state = __import__("json").loads((out / ".state.json").read_text())
+    state = json.loads((out / ".state.json").read_text())
     assert kept == {e["key"] for e in state["tasks"].values()}
     assert report.cache["removed"] >= 3 and report.cache["freed"] > 0
     assert toy_graph.build(src, out, sep="-", cache_limit=0).ran == []  # nothing of its own went
