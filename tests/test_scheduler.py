@@ -306,6 +306,18 @@ def test_build_given_fewer_cores_holds_its_workers_to_them(tmp_path):
         assert pool.submit(_affinity).result() == [usable[0]]
 
 
+@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="needs two usable CPUs")
+def test_a_one_core_task_keeps_to_a_cpu_of_its_own(src, tmp_path):
+    """Two tasks side by side each run on their own CPU (fcpw's threads of one would
+    otherwise wait on the other's); a task alone runs on all of the build's."""
+    usable = _affinity()
+    report = toy_graph.build(src, tmp_path / "build", jobs=2, delay=0.05)  # both uppers run at once
+    a, b = (report.results[n]["cpus"] for n in ("upper:a", "upper:b"))
+    assert len(a) == 1 and len(b) == 1 and a != b and set(a + b) <= set(usable)
+    assert report.results["join"]["cpus"] == usable
+
+
 def test_init_worker_in_a_main_process_keeps_its_exit_code():
     """Workers skip the interpreter's exit clean-up (os._exit); a main process that
     calls init_worker (a test does) must still exit with its own code."""

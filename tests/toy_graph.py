@@ -26,14 +26,19 @@ def upper(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:
             f.flush()
             if delay:
                 time.sleep(delay)
-    return {"chars": len(text), "cores": os.environ.get(SHARE_VARIABLE)}
+    return {"chars": len(text), "cores": os.environ.get(SHARE_VARIABLE), "cpus": _cpus()}
 
 
 def join(staging: Path, build: str, sep: str) -> dict:
     parts = [(Path(build) / "up" / f"{n}.txt").read_text() for n in ("a", "b")]
     out = staging / "joined.txt"
     out.write_text(sep.join(parts))
-    return {"parts": 2, "cores": os.environ.get(SHARE_VARIABLE)}
+    return {"parts": 2, "cores": os.environ.get(SHARE_VARIABLE), "cpus": _cpus()}
+
+
+def _cpus() -> list[int] | None:
+    """The CPUs the task's process may run on (None where the OS does not say)."""
+    return sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
 
 
 def tasks(src: Path, build: Path, sep: str = "+", delay: float = 0.0) -> list[Task]:
