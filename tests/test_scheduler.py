@@ -424,3 +424,35 @@ def test_cache_limit_sizes():
     for bad in ("-1", "five", "inf", "nan", "3X"):
         with pytest.raises(ValueError):
             parse_size(bad)
+
+
+def test_an_idle_worker_imports_ahead_what_the_waiting_tasks_will(src, tmp_path):
+    """An edit runs its chain task by task: while one runs, an idle worker imports
+    the modules the tasks waiting on it name (Task.warm). A cold build, whose
+    workers are all busy, sends none."""
+    from dataclasses import replace
+
+    from pipeline.builder.executors import InProcess
+    from pipeline.builder.scheduler import Scheduler
+
+    calls = []
+
+    class Recording(InProcess):
+        def submit(self, fn, /, *args, **kwargs):
+            calls.append(fn.__name__ if fn.__name__ == "warm_up" else args[0].__name__)
+            if fn.__name__ == "warm_up":
+                calls.append(args[0])
+            return super().submit(fn, *args, **kwargs)
+
+    out = tmp_path / "build"
+
+    def build():
+        calls.clear()
+        up_a, up_b, join = toy_graph.tasks(src, out)
+        Scheduler(out, jobs=2, executor=lambda workers: Recording()).run([up_a, up_b, replace(join, warm=("wave",))])
+        return list(calls)
+
+    assert build() == ["upper", "upper", "join"]
+    (src / "a.txt").write_text("alpha, edited")
+    assert build() == ["upper", "warm_up", ("wave",), "join"]
+    assert "wave" in sys.modules

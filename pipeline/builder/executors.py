@@ -74,6 +74,19 @@ def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict
             os.environ[SHARE_VARIABLE] = before
 
 
+def warm_up(modules: tuple[str, ...]) -> None:
+    """Import `modules` (those a coming task's action will import), in a worker that
+    would otherwise wait idle for it. A module that fails to import is left for the
+    task to report."""
+    import importlib
+
+    for name in modules:
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - the task that needs it reports it
+            pass
+
+
 # --- a local pool of spawned processes (the default) ---------------------------
 
 

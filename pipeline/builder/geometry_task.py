@@ -9,6 +9,10 @@ from pathlib import Path
 from .. import config
 from .layout import ir_path, source_path
 
+# what build_geometry imports (mostly inside functions): 0.3-0.4 s in a fresh worker
+WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
+        "pipeline.validate.checks", "scipy.spatial", "trimesh.triangles", "fcpw", "igl", "meshoptimizer")
+
 
 def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:
     """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order.

@@ -113,6 +113,8 @@ class Task:
     code:    code version of the steps the action runs.
     outputs: paths relative to the build folder, each produced by this task alone.
     cost:    a scheduling hint only (longest first); it never changes what a task makes.
+    warm:    modules the action imports, which a worker left idle while this task
+             waits on others imports beforehand (a hint as well).
     action:  a picklable callable `action(**args)` run in a worker; it writes the
              outputs into the staging folder it is given and returns a JSON-able dict.
     """
@@ -128,6 +130,7 @@ class Task:
     outputs: tuple[str, ...] = ()
     needs_blender: bool = False
     cost: float = 0.0  # expected work (any unit): longer tasks start first; not in the key
+    warm: tuple[str, ...] = ()  # modules to import ahead in an idle worker; not in the key
     key: str = ""
     input_hashes: dict[str, str] = field(default_factory=dict)
 

@@ -27,7 +27,7 @@ from pathlib import Path
 
 from ..errors import UserError
 from .cache import DEFAULT_LIMIT, Cache, cache_root
-from .executors import ExecutorFactory, Workers, local_pool, run_task
+from .executors import ExecutorFactory, Workers, local_pool, run_task, warm_up
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
 STATE_FILE = ".state.json"
@@ -176,6 +176,7 @@ class Scheduler:
             pending = {t.name: t for t in order}
             done: set[str] = set()
             running: dict[Future, Task] = {}
+            warming: list[Future] = []  # warm-ups sent to idle workers (at most one per worker)
             pool = None
             try:
                 while pending or running:
@@ -225,6 +226,8 @@ class Scheduler:
                         alone = not running and not any(t.name in pending for t in ready if t is not task)
                         cores = self.cores if alone else threads
                         running[pool.submit(run_task, task.action, task.args, str(staging), cores)] = task
+                    if pool is not None:
+                        self._warm_idle(pool, running, warming, pending)
                     if not running:
                         if pending:  # everything left waits on a failed task
                             continue
@@ -260,6 +263,17 @@ class Scheduler:
             if remade and self.cache_limit is not None:
                 report.cache = self.cache.prune(self.cache_limit, {e["key"] for e in state["tasks"].values()})
         return report
+
+    def _warm_idle(self, pool, running: dict, warming: list[Future], pending: dict[str, Task]) -> None:
+        """Workers left idle while the tasks still waiting depend on running ones import
+        what those will (Task.warm): an edit runs its chain task by task, and each task
+        would otherwise start in a worker that has not imported its libraries. A pool
+        hands the next call to the worker that has waited longest, so the idle worker
+        warmed now is the one the next task goes to. At most one warm-up per worker."""
+        idle = min(self.jobs - len(running) - sum(not f.done() for f in warming), self.jobs - len(warming))
+        modules = tuple(dict.fromkeys(m for t in pending.values() for m in t.warm))
+        for _ in range(max(0, idle) if modules else 0):
+            warming.append(pool.submit(warm_up, modules))
 
     def _finish(self, state: dict, task: Task, digests: dict, meta: dict, report: BuildReport) -> None:
         entry = record(task, digests, meta["files"])

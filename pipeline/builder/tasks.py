@@ -30,9 +30,11 @@ from pathlib import Path
 
 from .. import config, ir
 from ..errors import UserError
+from .geometry_task import WARM as GEOMETRY_WARM
 from .geometry_task import build_geometry
 from .graph import Task, code_version
 from .layout import IR_FOLDER, SOURCE_FOLDER
+from .package_task import WARM as PACKAGE_WARM
 from .package_task import build_asset
 from .source_task import build_source
 
@@ -47,6 +49,10 @@ PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.d
 CHECKS_CODE = ("pipeline.validate.checks", "pipeline.ir", "pipeline.digest")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
               "pipeline.scene", "pipeline.export", "pipeline.digest", "pipeline.geometry.transform")
+# what build_scene imports (inside functions): an idle worker imports them ahead
+SCENE_WARM = ("pipeline.scene.assemble", "pipeline.scene.scene_gltf", "pipeline.scene.stage_usd",
+              "pipeline.scene.world_sdf", "pipeline.scene.checks", "pipeline.scene.terrain", "pipeline.georef",
+              "pipeline.ingest.floorplan", "pyproj", "astral", "pxr.Usd", "pxr.Sdf", "pxr.Gf")
 # asset.toml keys only the package task reads (the readers get neutral values for them)
 METADATA_KEYS = ("description", "category", "mass_kg", "triangle_budget")
 # asset.toml tables only the geometry task reads
@@ -200,6 +206,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             code=geometry_code,
             outputs=(f"{IR_FOLDER}/{asset_id}/",),
             cost=cost,
+            warm=GEOMETRY_WARM,
         ))
         p.tasks.append(Task(
             name=f"asset:{asset_id}",
@@ -212,6 +219,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             params={"asset": asset_id},
             code=package_code,
             outputs=(f"models/{asset_id}/", f"models/{asset_id}__lod*"),
+            warm=PACKAGE_WARM,
         ))
     if not only:
         p.tasks.extend(scene_tasks(p, Path(sources), Path(build)))
@@ -232,5 +240,5 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     placed_assets = sorted({pl.asset_id for pl in p.floorplan.placements})
     scene = Task(name="scene", stage="scene", action=build_scene, args=args, inputs=inputs,
                  deps=("terrain", *(f"asset:{a}" for a in placed_assets)),
-                 params={"site": site.name}, code=code, outputs=("scene/",))
+                 params={"site": site.name}, code=code, outputs=("scene/",), warm=SCENE_WARM)
     return [terrain, scene]
