@@ -176,7 +176,7 @@ class Scheduler:
             pending = {t.name: t for t in order}
             done: set[str] = set()
             running: dict[Future, Task] = {}
-            warming: list[Future] = []  # warm-ups sent to idle workers (at most one per worker)
+            warming: list[Future] = []  # warm-ups sent to idle workers (_warm_idle)
             pool = None
             try:
                 while pending or running:
@@ -269,7 +269,8 @@ class Scheduler:
         what those will (Task.warm): an edit runs its chain task by task, and each task
         would otherwise start in a worker that has not imported its libraries. A pool
         hands the next call to the worker that has waited longest, so the idle worker
-        warmed now is the one the next task goes to. At most one warm-up per worker."""
+        warmed now is the one the next task goes to. A build sends no more warm-ups
+        than it has workers."""
         idle = min(self.jobs - len(running) - sum(not f.done() for f in warming), self.jobs - len(warming))
         modules = tuple(dict.fromkeys(m for t in pending.values() for m in t.warm))
         for _ in range(max(0, idle) if modules else 0):
