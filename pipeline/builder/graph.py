@@ -113,8 +113,8 @@ class Task:
     code:    code version of the steps the action runs.
     outputs: paths relative to the build folder, each produced by this task alone.
     cost:    a scheduling hint only (longest first); it never changes what a task makes.
-    warm:    modules the action imports, which a worker left idle while this task
-             waits on others imports beforehand (a hint as well).
+    warm:    modules the action imports: a worker that is idle while this task waits
+             on others imports them beforehand (a hint as well, not in the key).
     action:  a picklable callable `action(**args)` run in a worker; it writes the
              outputs into the staging folder it is given and returns a JSON-able dict.
     """
