@@ -11,7 +11,7 @@ from .layout import ir_path, source_path
 
 # what build_geometry imports (mostly inside functions): 0.3-0.4 s in a fresh worker
 WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
-        "pipeline.validate.checks", "scipy.spatial", "trimesh.triangles", "fcpw", "igl", "meshoptimizer")
+        "pipeline.validate.checks", "scipy.spatial", "fcpw", "igl", "meshoptimizer")
 
 
 def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:

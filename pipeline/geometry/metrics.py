@@ -71,6 +71,48 @@ def sample_surface(vertices: np.ndarray, faces: np.ndarray, count: int, seed: in
     return pts, face.astype(np.int64)
 
 
+def closest_points_on_triangles(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(k, 3) the point of each triangle `triangles: (k, 3, 3)` nearest to each of
+    `points: (k, 3)`: the point's projection on the plane where it falls inside the
+    triangle, else the nearest of the three edges' nearest points. Every result is a
+    convex combination of its triangle's corners, and no region test decides, so a
+    sliver or a collapsed triangle gives its true nearest point too: a distance
+    measured to the result is never under the true one by more than rounding."""
+    a, b, c = (np.ascontiguousarray(triangles[:, i].T) for i in range(3))  # (3, k) each: rows x, y, z
+    p = np.ascontiguousarray(points.T)
+    normal = _cross(b - a, c - a)
+    # barycentric weights of the projection (an offset along the normal adds nothing)
+    weights = np.stack([_dot(_cross(q - p, r - p), normal) for q, r in ((b, c), (c, a), (a, b))])
+    inside = (_dot(normal, normal) > 0) & (weights >= 0).all(axis=0)
+    best = np.empty_like(p)
+    w = weights[:, inside] / weights[:, inside].sum(axis=0)
+    best[:, inside] = w[0] * a[:, inside] + w[1] * b[:, inside] + w[2] * c[:, inside]
+    out = ~inside
+    if out.any():
+        a, b, c, q = a[:, out], b[:, out], c[:, out], p[:, out]
+        nearest, nearest_sq = a, _dot(q - a, q - a)
+        for p0, p1 in ((a, b), (b, c), (c, a)):
+            edge = p1 - p0
+            length_sq = _dot(edge, edge)
+            t = np.divide(_dot(q - p0, edge), length_sq, out=np.zeros(q.shape[1]), where=length_sq > 0)
+            on_edge = p0 + np.clip(t, 0.0, 1.0) * edge
+            sq = _dot(q - on_edge, q - on_edge)
+            nearer = sq < nearest_sq
+            nearest, nearest_sq = np.where(nearer, on_edge, nearest), np.where(nearer, sq, nearest_sq)
+        best[:, out] = nearest
+    return best.T
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Cross products of (3, k) column vectors."""
+    return np.stack([u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]])
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(k,) dot products of (3, k) column vectors."""
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
 class SurfaceDistance:
     """Distances from points to one triangle surface (vertices (n, 3), faces (m, 3)),
     indexed once and queried many times (the LOD search measures several candidates
@@ -115,7 +157,6 @@ class SurfaceDistance:
         than the nearest (measured on the sample's busbars); libigl measures again,
         in float64, every distance that decides something."""
         import fcpw
-        from trimesh.triangles import closest_point
 
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if self.scene is None:
@@ -127,7 +168,7 @@ class SurfaceDistance:
         self.scene.find_closest_points(np.asfortranarray(local, dtype=np.float32),
                                        np.full(len(local), np.inf, dtype=np.float32), found)
         face = np.fromiter((hit.primitive_index for hit in found), dtype=np.int64, count=len(found))
-        d = np.linalg.norm(closest_point(self.vertices[self.faces[face]], local) - local, axis=1)
+        d = np.linalg.norm(closest_points_on_triangles(self.vertices[self.faces[face]], local) - local, axis=1)
         measured = np.zeros(len(d), dtype=bool)
         todo = d > exact_above
         todo[np.argmax(d)] = True
