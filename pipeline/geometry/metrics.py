@@ -75,9 +75,10 @@ def closest_points_on_triangles(triangles: np.ndarray, points: np.ndarray) -> np
     """(k, 3) the point of each triangle `triangles: (k, 3, 3)` nearest to each of
     `points: (k, 3)`: the point's projection on the plane where it falls inside the
     triangle, else the nearest of the three edges' nearest points. Every result is a
-    convex combination of its triangle's corners, and no region test decides, so a
-    sliver or a collapsed triangle gives its true nearest point too: a distance
-    measured to the result is never under the true one by more than rounding."""
+    convex combination of its triangle's corners and no region test decides, so on a
+    sliver or a collapsed triangle too the result lies on the triangle (where region
+    tests can put it off): a distance measured to it is never under the true one by
+    more than rounding, and on the needles tested within 1e-8 of it."""
     a, b, c = (np.ascontiguousarray(triangles[:, i].T) for i in range(3))  # (3, k) each: rows x, y, z
     p = np.ascontiguousarray(points.T)
     normal = _cross(b - a, c - a)
