@@ -90,11 +90,13 @@ class Mesh:
 
     @cached_property
     def digest(self) -> str:
-        """sha256 of everything the mesh holds (its arrays never change): the one key
-        by which the memos know a mesh (checks' findings, COLLADA documents)."""
+        """sha256 of everything the mesh holds (its arrays never change), shape keys'
+        names included: the one key by which the memos know a mesh (checks' findings,
+        COLLADA documents)."""
         from .digest import sha256_arrays
 
-        return sha256_arrays(self.vertices, self.faces, self.normals, self.uvs,
+        names = np.array([k.name for k in self.shape_keys], dtype=str)
+        return sha256_arrays(self.vertices, self.faces, self.normals, self.uvs, names,
                              *(k.vertices for k in self.shape_keys))
 
     def bounds(self) -> np.ndarray:

@@ -107,6 +107,8 @@ def test_mesh_digest_follows_content_not_identity(tmp_path):
     assert ir.Mesh(box.vertices, box.faces, None, box.uvs).digest != box.digest
     keyed = ir.Mesh(box.vertices, box.faces, box.normals, box.uvs, (ir.ShapeKey("open", box.vertices * 2),))
     assert keyed.digest != box.digest
+    renamed = ir.Mesh(box.vertices, box.faces, box.normals, box.uvs, (ir.ShapeKey("shut", box.vertices * 2),))
+    assert renamed.digest != keyed.digest
     asset = articulated_asset()
     irfile.write(tmp_path / "a.ir", asset)
     back, _ = irfile.read(tmp_path / "a.ir")

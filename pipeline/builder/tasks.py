@@ -30,12 +30,10 @@ from pathlib import Path
 
 from .. import config, ir
 from ..errors import UserError
-from .geometry_task import WARM as GEOMETRY_WARM
-from .geometry_task import build_geometry
+from .geometry_task import WARM as GEOMETRY_WARM, build_geometry
 from .graph import Task, code_version
 from .layout import IR_FOLDER, SOURCE_FOLDER
-from .package_task import WARM as PACKAGE_WARM
-from .package_task import build_asset
+from .package_task import WARM as PACKAGE_WARM, build_asset
 from .source_task import build_source
 
 SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
