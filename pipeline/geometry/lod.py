@@ -239,7 +239,10 @@ class _Judge:
         # subset of the original's, so welding them again would only repeat this
         self.topology = _clean.weld_map(vertices, _clean.weld_tolerance(vertices))
         topo = self.topology[faces]
-        self.non_manifold = _clean.non_manifold_edge_count(topo)
+        edges, counts = _clean.edge_face_counts(topo)
+        # the original's own non-manifold edges, keyed: a candidate keeping them adds none
+        self.non_manifold_keys = np.sort(_edge_keys(edges[counts > 2], len(vertices)))
+        self.non_manifold = len(self.non_manifold_keys)
         # normals on the welded surface, so a UV seam does not split a corner's normal
         self.normals = vertex_normals(vertices, topo)[self.topology]
         self.fans = _vertex_fans(vertices, faces)
@@ -360,6 +363,11 @@ class _Judge:
         if added > 0 and threshold is not None:
             edges, counts = _clean.edge_face_counts(topo)
             e = edges[counts > 2]
+            if kept is not None:
+                # only the edges this candidate made non-manifold are misses: locking
+                # around the original's own (a lattice of welded members has hundreds)
+                # changes nothing, and once they are all locked the search gave up
+                e = e[~_lookup(self.non_manifold_keys, _edge_keys(e, len(self.vertices)))[0]]
             at = self.vertices if kept is not None else v  # topo's numbering
             bad.append((at[e[:, 0]] + at[e[:, 1]]) / 2.0)
             how_far.append(np.full(len(e), np.inf))
@@ -376,6 +384,11 @@ class _Judge:
         if cand_keys is not None and len(index):
             self.bound[index], self.bound_key[index] = d, cand_keys[face]
         return d
+
+
+def _edge_keys(edges: np.ndarray, n_vertices: int) -> np.ndarray:
+    """One int64 per undirected edge `(e, 2)` of sorted vertex pairs."""
+    return edges[:, 0].astype(np.int64) * n_vertices + edges[:, 1]
 
 
 def _oriented_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray | None:
@@ -466,11 +479,14 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
             continue
         if len(where) > WIDESPREAD * len(judge.queries):
             # misses everywhere (a smooth surface): the target itself is too coarse;
-            # lock only around what went badly wrong (a small part collapsed away)
+            # lock only around what went badly wrong (a small part collapsed away).
+            # When that too is everywhere (the whole mesh collapsed: circuit_breaker at
+            # 15 mm), a lock would freeze most of the mesh at full detail (its LOD2 kept
+            # all of LOD1's 60,471 faces): the lower target alone, then
             s /= 2.0
             widespread = where
             where = where[judge.how_far > 2.0 * budget]
-            if len(where) == 0:
+            if len(where) == 0 or len(where) > WIDESPREAD * len(judge.queries):
                 continue
         new = judge.near_vertices(where, min(4 << round_, LOCK_NEIGHBOURS))  # wider each round
         if len(new) == 0 or lock[new].all():
