@@ -265,17 +265,24 @@ def test_a_collapse_everywhere_lowers_the_target_and_locks_nothing(monkeypatch):
     assert len(level.faces) < len(mesh.faces) // 10
 
 
-def test_only_the_non_manifold_edges_a_candidate_adds_are_misses():
-    """The original's own non-manifold edges (three fins on one edge) are no miss of a
-    candidate that keeps them; the one it adds elsewhere is."""
+def test_non_manifold_edges_are_counted_per_part_and_only_added_ones_are_misses():
+    """Two parts: the first's own non-manifold edge (three fins on one edge) is no
+    miss of a candidate that keeps it; an edge the candidate makes non-manifold in the
+    second part is, and counts as added even where the first part loses its own (the
+    validator judges each visual on its own)."""
     fin = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0], [0.5, 0, 1]], dtype=float)
     vertices = np.vstack([fin, fin + [5.0, 0, 0]])
+    parts = np.repeat([0, 1], 5)
     own = [[0, 1, 2], [1, 0, 3], [0, 1, 4]]  # edge 0-1 under three faces
     faces = np.array(own + [[5, 6, 7], [6, 5, 8], [7, 9, 8]])
-    judge = lod._Judge(vertices, faces, 2000)
+    judge = lod._Judge(vertices, faces, 2000, parts)
     assert judge.non_manifold == 1
-    candidate = np.vstack([faces, [[5, 6, 9]]])  # edge 5-6 now under three faces too
-    result, where = judge.measure(vertices, candidate, np.arange(len(vertices)), 0.01, threshold=0.008)
-    assert result.non_manifold_added == 1
+    grows = np.vstack([faces, [[5, 6, 9]]])  # edge 5-6 now under three faces too
+    result, where = judge.measure(vertices, grows, np.arange(len(vertices)), 0.01, threshold=0.008)
+    assert result.non_manifold_added == 1 and not result.valid
     edge_middles = [p for p in where if np.isclose(p[1], 0) and np.isclose(p[2], 0)]
     assert edge_middles and all(np.allclose(p, [5.5, 0, 0]) for p in edge_middles)
+
+    trades = np.vstack([faces[1:], [[5, 6, 9]]])  # the first part's edge gone, the second's added
+    assert lod._Judge(vertices, faces, 2000).measure(vertices, trades, np.arange(10), 0.01)[0].non_manifold_added == 0
+    assert judge.measure(vertices, trades, np.arange(10), 0.01)[0].non_manifold_added == 1

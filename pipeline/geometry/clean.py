@@ -152,16 +152,22 @@ def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def non_manifold_edge_count(faces: np.ndarray) -> int:
-    """Number of edges used by more than two faces (`faces: (m, 3)` int): each
-    undirected edge keyed by one int64 and counted in one 1-D sort."""
+    """Number of edges used by more than two faces (`faces: (m, 3)` int)."""
     if len(faces) == 0:
         return 0
+    return len(non_manifold_edge_keys(faces, int(np.max(faces)) + 1))
+
+
+def non_manifold_edge_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """The edges used by more than two faces, each as one int64 key (lower vertex *
+    n_vertices + higher), ascending: every undirected edge keyed and counted in one
+    1-D sort."""
     corners = np.asarray(faces, dtype=np.int64)
     heads, tails = corners.ravel(), corners[:, [1, 2, 0]].ravel()
-    lo, hi = np.minimum(heads, tails), np.maximum(heads, tails)
-    key = np.sort(lo * (int(hi.max()) + 1) + hi)
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    return int((np.diff(np.r_[starts, len(key)]) > 2).sum())
+    key = np.sort(np.minimum(heads, tails) * n_vertices + np.maximum(heads, tails))
+    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else np.zeros(0, dtype=np.int64)
+    counts = np.diff(np.r_[starts, len(key)])
+    return key[starts[counts > 2]]
 
 
 def _face_graph(faces: np.ndarray):

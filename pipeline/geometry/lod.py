@@ -231,18 +231,24 @@ class Simplified:
 class _Judge:
     """Measures candidates against one original mesh (indices built once)."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, samples: int):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, samples: int, parts: np.ndarray | None = None):
         samples = int(np.clip(SAMPLES_PER_FACE * len(faces), MIN_SAMPLES, samples))
         self.vertices, self.faces, self.samples = vertices, faces, samples
         self.reference = SurfaceDistance(vertices, faces)
         # a candidate's topology is judged on the original's weld: its vertices are a
-        # subset of the original's, so welding them again would only repeat this
-        self.topology = _clean.weld_map(vertices, _clean.weld_tolerance(vertices))
+        # subset of the original's, so welding them again would only repeat this. Each
+        # part (`parts: (n,)` ids) apart, as the validator judges each visual: two
+        # members that touch share no edge
+        attrs = [] if parts is None else [(np.asarray(parts, dtype=np.float64)[:, None], 0.5)]
+        self.topology = _clean.weld_map(vertices, _clean.weld_tolerance(vertices), attrs)
         topo = self.topology[faces]
-        edges, counts = _clean.edge_face_counts(topo)
-        # the original's own non-manifold edges, keyed: a candidate keeping them adds none
-        self.non_manifold_keys = np.sort(_edge_keys(edges[counts > 2], len(vertices)))
+        # the original's own non-manifold edges, and how many each part has: a part
+        # may trade some for others (a lattice's joints move as it simplifies), as the
+        # validator's per-visual check allows, but not have more
+        self.part = np.zeros(len(vertices), np.int64) if parts is None else np.unique(parts, return_inverse=True)[1]
+        self.non_manifold_keys = _clean.non_manifold_edge_keys(topo, len(vertices))
         self.non_manifold = len(self.non_manifold_keys)
+        self.part_non_manifold = self._per_part(self.non_manifold_keys)
         # normals on the welded surface, so a UV seam does not split a corner's normal
         self.normals = vertex_normals(vertices, topo)[self.topology]
         self.fans = _vertex_fans(vertices, faces)
@@ -263,6 +269,10 @@ class _Judge:
         # at most that far from the point: a bound that spares most re-measurements.
         self.bound_key = np.full(len(self.queries), -1, dtype=np.int64)
         self.bound = np.full(len(self.queries), np.inf)
+
+    def _per_part(self, edge_keys: np.ndarray) -> np.ndarray:
+        """How many of the edges (keys on the original's vertices) each part has."""
+        return np.bincount(self.part[edge_keys // len(self.vertices)], minlength=int(self.part.max(initial=0)) + 1)
 
     def near_vertices(self, points: np.ndarray, k: int = 4) -> np.ndarray:
         """Original vertex ids nearest to `points: (p, 3)` (k each), unique."""
@@ -348,9 +358,19 @@ class _Judge:
         d_there = np.zeros(len(index))
         d_there[~bounded] = self._distances(target, index[~bounded], cand_keys, decides)
         there = float(d_there.max(initial=0.0))
-        if topo is None:
+        if topo is None:  # new vertices: only the count of non-manifold edges compares
             topo = _topology_faces(v, f)
-        added = _clean.non_manifold_edge_count(topo) - self.non_manifold
+            new_edges = None
+            added = _clean.non_manifold_edge_count(topo) - self.non_manifold
+        else:
+            # counted per part, not over the union: one part's lost edges do not pay
+            # for another's added ones (gantry's LOD2 lost 150 in its lattice and added
+            # 1-4 to each of four members, which the per-visual check then refused)
+            keys = _clean.non_manifold_edge_keys(topo, len(self.vertices))
+            grown = self._per_part(keys) - self.part_non_manifold
+            added = int(np.maximum(grown, 0).sum())
+            in_grown_part = grown[self.part[keys // len(self.vertices)]] > 0
+            new_edges = keys[~_lookup(self.non_manifold_keys, keys)[0] & in_grown_part]
         if bounded.any() and there <= threshold and back <= tolerance and flips == 0 and added <= 0:
             d_there[bounded] = self._distances(target, index[bounded], cand_keys, decides)
             there = float(d_there.max(initial=0.0))
@@ -361,13 +381,15 @@ class _Judge:
             bad += [queries[d_there > threshold], own[d_back > threshold]]
             how_far += [d_there[d_there > threshold], d_back[d_back > threshold]]
         if added > 0 and threshold is not None:
-            edges, counts = _clean.edge_face_counts(topo)
-            e = edges[counts > 2]
-            if kept is not None:
-                # only the edges this candidate made non-manifold are misses: locking
-                # around the original's own (a lattice of welded members has hundreds)
-                # changes nothing, and once they are all locked the search gave up
-                e = e[~_lookup(self.non_manifold_keys, _edge_keys(e, len(self.vertices)))[0]]
+            if new_edges is None:
+                edges, counts = _clean.edge_face_counts(topo)
+                e = edges[counts > 2]
+            else:
+                # only the added edges are misses: locking around the original's own (a
+                # lattice of welded members has hundreds) changes nothing, and once
+                # they were all locked the search gave up
+                n = len(self.vertices)
+                e = np.c_[new_edges // n, new_edges % n]
             at = self.vertices if kept is not None else v  # topo's numbering
             bad.append((at[e[:, 0]] + at[e[:, 1]]) / 2.0)
             how_far.append(np.full(len(e), np.inf))
@@ -384,11 +406,6 @@ class _Judge:
         if cand_keys is not None and len(index):
             self.bound[index], self.bound_key[index] = d, cand_keys[face]
         return d
-
-
-def _edge_keys(edges: np.ndarray, n_vertices: int) -> np.ndarray:
-    """One int64 per undirected edge `(e, 2)` of sorted vertex pairs."""
-    return edges[:, 0].astype(np.int64) * n_vertices + edges[:, 1]
 
 
 def _oriented_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray | None:
@@ -657,10 +674,12 @@ def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: 
     rep = _clean.weld_map(local, _clean.weld_tolerance(local), attrs)
     first, welded_index = np.unique(rep, return_inverse=True)
     welded, welded_faces = local[first], welded_index[faces]
-    keys = None if memo is None else _LevelKeys(welded, welded_faces, samples, iterations, budgets_m, len(faces))
+    welded_parts = None if parts is None else np.asarray(parts, dtype=np.int64)[first]
+    keys = None if memo is None else _LevelKeys(welded, welded_faces, welded_parts, samples, iterations, budgets_m,
+                                                len(faces))
     levels = [] if memo is None else _recall(memo, keys, len(welded))
     if len(levels) < len(budgets_m):
-        judge = _Judge(welded, welded_faces, samples)
+        judge = _Judge(welded, welded_faces, samples, welded_parts)
         searched = _search_levels(judge, budgets_m[len(levels):], iterations, _ceiling_after(levels, len(faces)))
         for best in searched:
             level = None if best is None else _Level(best.kept[best.faces], best.error_m, best.flipped,
@@ -701,9 +720,10 @@ class _LevelKeys:
     settings, then per level its budget and its ceiling (known once the finer levels
     are)."""
 
-    def __init__(self, welded: np.ndarray, welded_faces: np.ndarray, samples: int, iterations: int, budgets,
-                 faces: int):
-        self.mesh = sha256_arrays(welded, welded_faces)
+    def __init__(self, welded: np.ndarray, welded_faces: np.ndarray, parts: np.ndarray | None, samples: int,
+                 iterations: int, budgets, faces: int):
+        # the parts too: the checks count each part's non-manifold edges apart
+        self.mesh = sha256_arrays(welded, welded_faces, parts)
         self.search = (int(samples), int(iterations))
         self.budgets, self.faces = [float(b) for b in budgets], faces
 
