@@ -276,15 +276,21 @@ class _Judge:
 
     def near_vertices(self, points: np.ndarray, k: int = 4) -> np.ndarray:
         """Original vertex ids nearest to `points: (p, 3)` (k each), unique."""
-        from scipy.spatial import cKDTree
-
         if len(points) == 0:
             return np.zeros(0, dtype=np.int64)
+        _, idx = self._tree().query(points, k=min(k, len(self.vertices)), workers=-1)
+        return np.unique(idx)
+
+    def nearest_vertex(self, points: np.ndarray) -> np.ndarray:
+        """The original vertex id nearest to each of `points: (p, 3)`."""
+        return self._tree().query(points, k=1, workers=-1)[1] if len(points) else np.zeros(0, dtype=np.int64)
+
+    def _tree(self):
+        from scipy.spatial import cKDTree
+
         if self._vertex_tree is None:
             self._vertex_tree = cKDTree(self.vertices)
-        k = min(k, len(self.vertices))
-        _, idx = self._vertex_tree.query(points, k=k, workers=-1)
-        return np.unique(idx)
+        return self._vertex_tree
 
     def __call__(self, v: np.ndarray, f: np.ndarray, kept: np.ndarray | None, tolerance: float) -> Simplified:
         return self.measure(v, f, kept, tolerance)[0]
@@ -505,11 +511,24 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
             where = where[judge.how_far > 2.0 * budget]
             if len(where) == 0 or len(where) > WIDESPREAD * len(judge.queries):
                 continue
-        new = judge.near_vertices(where, min(4 << round_, LOCK_NEIGHBOURS))  # wider each round
+        new = _lock_around(judge, lock, where, round_)
         if len(new) == 0 or lock[new].all():
             break
         lock[new] = True
     return None, rounds
+
+
+def _lock_around(judge: _Judge, lock: np.ndarray, where: np.ndarray, round_: int) -> np.ndarray:
+    """The original vertices to lock around the misses `where: (p, 3)`: the 4 nearest
+    a miss where nothing is locked yet, wider (doubling each round, up to
+    LOCK_NEIGHBOURS) around one whose nearest vertex a lock already held. Widening
+    around every miss by the round froze fresh misses' whole neighbourhoods (gantry's
+    LOD2: 10,305 faces with 63 flips became 37,662; 28,423 with this)."""
+    if len(where) == 0:
+        return np.zeros(0, dtype=np.int64)
+    again = lock[judge.nearest_vertex(where)]
+    return np.union1d(judge.near_vertices(where[~again], 4),
+                      judge.near_vertices(where[again], min(4 << round_, LOCK_NEIGHBOURS)))
 
 
 def _beats(found: int | None, top: int, ceiling: int) -> bool:
