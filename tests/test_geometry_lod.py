@@ -288,15 +288,18 @@ def test_non_manifold_edges_are_counted_per_part_and_only_added_ones_are_misses(
     assert judge.measure(vertices, trades, np.arange(10), 0.01)[0].non_manifold_added == 1
 
 
-def test_a_fresh_miss_locks_its_four_nearest_vertices_a_repeated_one_widens():
-    """Round 5: a miss where no vertex is locked yet locks its 4 nearest vertices; one
-    whose nearest vertex a lock already holds locks min(4 << 5, LOCK_NEIGHBOURS)."""
+def test_a_fresh_miss_locks_a_narrow_neighbourhood_a_repeated_one_widens():
+    """A miss where no vertex is locked yet locks its 4 nearest vertices in rounds 0-2,
+    8 in rounds 3-5, ...; one whose nearest vertex a lock already holds locks
+    4 << round (at most LOCK_NEIGHBOURS)."""
     v, f = lod.noisy_sphere(4, 0.0)
     judge = lod._Judge(v, f, 2000)
     miss = v[[0]] * 1.01
-    fresh = lod._lock_around(judge, np.zeros(len(v), dtype=bool), miss, 5)
+    nothing = np.zeros(len(v), dtype=bool)
+    fresh = lod._lock_around(judge, nothing, miss, 2)
     assert len(fresh) == 4 and judge.nearest_vertex(miss)[0] in fresh
-    lock = np.zeros(len(v), dtype=bool)
+    assert len(lod._lock_around(judge, nothing, miss, 5)) == 8
+    lock = nothing.copy()
     lock[judge.nearest_vertex(miss)] = True
     again = lod._lock_around(judge, lock, miss, 5)
     assert len(again) == lod.LOCK_NEIGHBOURS and set(fresh) <= set(again)

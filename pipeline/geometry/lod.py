@@ -519,15 +519,17 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
 
 
 def _lock_around(judge: _Judge, lock: np.ndarray, where: np.ndarray, round_: int) -> np.ndarray:
-    """The original vertices to lock around the misses `where: (p, 3)`: the 4 nearest
-    a miss where nothing is locked yet, wider (doubling each round, up to
-    LOCK_NEIGHBOURS) around one whose nearest vertex a lock already held. Widening
-    around every miss by the round froze fresh misses' whole neighbourhoods (gantry's
-    LOD2: 10,305 faces with 63 flips became 37,662; 28,423 with this)."""
+    """The original vertices to lock around the misses `where: (p, 3)`. Around a miss
+    whose nearest vertex a lock already holds, a neighbourhood doubling each round (4,
+    8, 16, ... up to LOCK_NEIGHBOURS); around one where nothing is locked yet, one
+    doubling every third round. Widening around every miss by the round froze fresh
+    misses' whole neighbourhoods (gantry's LOD2: 10,305 faces with 63 flips became
+    37,662, 28,423 with 4 vertices a fresh miss); 4 in every round made slow searches
+    slower still (power_transformer's LOD3 ran out of rounds)."""
     if len(where) == 0:
         return np.zeros(0, dtype=np.int64)
     again = lock[judge.nearest_vertex(where)]
-    return np.union1d(judge.near_vertices(where[~again], 4),
+    return np.union1d(judge.near_vertices(where[~again], min(4 << (round_ // 3), LOCK_NEIGHBOURS)),
                       judge.near_vertices(where[again], min(4 << round_, LOCK_NEIGHBOURS)))
 
 
