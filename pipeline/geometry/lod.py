@@ -503,9 +503,9 @@ def _search_meshopt(judge: _Judge, budget: float, iterations: int,
         if len(where) > WIDESPREAD * len(judge.queries):
             # misses everywhere (a smooth surface): the target itself is too coarse;
             # lock only around what went badly wrong (a small part collapsed away).
-            # When that too is everywhere (the whole mesh collapsed: circuit_breaker at
-            # 15 mm), a lock would freeze most of the mesh at full detail (its LOD2 kept
-            # all of LOD1's 60,471 faces): the lower target alone, then
+            # When that too is everywhere (the whole mesh collapsed), a lock would
+            # freeze most of the mesh at full detail (the test insulator at 5 cm kept
+            # 6,284 of its 15,072 faces; a few hundred now): the lower target alone
             s /= 2.0
             widespread = where
             where = where[judge.how_far > 2.0 * budget]
@@ -524,8 +524,8 @@ def _lock_around(judge: _Judge, lock: np.ndarray, where: np.ndarray, round_: int
     8, 16, ... up to LOCK_NEIGHBOURS); around one where nothing is locked yet, one
     doubling every third round. Widening around every miss by the round froze fresh
     misses' whole neighbourhoods (gantry's LOD2: 10,305 faces with 63 flips became
-    37,662, 28,423 with 4 vertices a fresh miss); 4 in every round made slow searches
-    slower still (power_transformer's LOD3 ran out of rounds)."""
+    37,662; 28,423 with 4 vertices around a fresh miss); 4 in every round made slow
+    searches slower still (power_transformer's LOD3 ran out of rounds)."""
     if len(where) == 0:
         return np.zeros(0, dtype=np.int64)
     again = lock[judge.nearest_vertex(where)]
