@@ -248,7 +248,7 @@ class _Judge:
         self.part = np.zeros(len(vertices), np.int64) if parts is None else np.unique(parts, return_inverse=True)[1]
         self.non_manifold_keys = _clean.non_manifold_edge_keys(topo, len(vertices))
         self.non_manifold = len(self.non_manifold_keys)
-        self.part_non_manifold = self._per_part(self.non_manifold_keys)
+        self.part_non_manifold = self._per_part(self.part[self.non_manifold_keys // len(vertices)])
         # normals on the welded surface, so a UV seam does not split a corner's normal
         self.normals = vertex_normals(vertices, topo)[self.topology]
         self.fans = _vertex_fans(vertices, faces)
@@ -270,9 +270,9 @@ class _Judge:
         self.bound_key = np.full(len(self.queries), -1, dtype=np.int64)
         self.bound = np.full(len(self.queries), np.inf)
 
-    def _per_part(self, edge_keys: np.ndarray) -> np.ndarray:
-        """How many of the edges (keys on the original's vertices) each part has."""
-        return np.bincount(self.part[edge_keys // len(self.vertices)], minlength=int(self.part.max(initial=0)) + 1)
+    def _per_part(self, edge_parts: np.ndarray) -> np.ndarray:
+        """How many edges each part has, given each edge's part."""
+        return np.bincount(edge_parts, minlength=int(self.part.max(initial=0)) + 1)
 
     def near_vertices(self, points: np.ndarray, k: int = 4) -> np.ndarray:
         """Original vertex ids nearest to `points: (p, 3)` (k each), unique."""
@@ -364,19 +364,23 @@ class _Judge:
         d_there = np.zeros(len(index))
         d_there[~bounded] = self._distances(target, index[~bounded], cand_keys, decides)
         there = float(d_there.max(initial=0.0))
+        at = self.vertices if kept is not None else v  # topo's numbering
         if topo is None:  # new vertices: only the count of non-manifold edges compares
             topo = _topology_faces(v, f)
-            new_edges = None
-            added = _clean.non_manifold_edge_count(topo) - self.non_manifold
+            new_edges = _clean.non_manifold_edge_keys(topo, len(at))
+            added = len(new_edges) - self.non_manifold
         else:
             # counted per part, not over the union: one part's lost edges do not pay
             # for another's added ones (gantry's LOD2 lost 150 in its lattice and added
-            # 1-4 to each of four members, which the per-visual check then refused)
-            keys = _clean.non_manifold_edge_keys(topo, len(self.vertices))
-            grown = self._per_part(keys) - self.part_non_manifold
+            # 1-4 to each of four members, which the per-visual check then refused).
+            # Only the added edges are misses: locking around the original's own (a
+            # lattice of welded members has hundreds) changes nothing, and once they
+            # were all locked the search gave up
+            keys = _clean.non_manifold_edge_keys(topo, len(at))
+            edge_part = self.part[keys // len(at)]
+            grown = self._per_part(edge_part) - self.part_non_manifold
             added = int(np.maximum(grown, 0).sum())
-            in_grown_part = grown[self.part[keys // len(self.vertices)]] > 0
-            new_edges = keys[~_lookup(self.non_manifold_keys, keys)[0] & in_grown_part]
+            new_edges = keys[~_lookup(self.non_manifold_keys, keys)[0] & (grown[edge_part] > 0)]
         if bounded.any() and there <= threshold and back <= tolerance and flips == 0 and added <= 0:
             d_there[bounded] = self._distances(target, index[bounded], cand_keys, decides)
             there = float(d_there.max(initial=0.0))
@@ -387,18 +391,8 @@ class _Judge:
             bad += [queries[d_there > threshold], own[d_back > threshold]]
             how_far += [d_there[d_there > threshold], d_back[d_back > threshold]]
         if added > 0 and threshold is not None:
-            if new_edges is None:
-                edges, counts = _clean.edge_face_counts(topo)
-                e = edges[counts > 2]
-            else:
-                # only the added edges are misses: locking around the original's own (a
-                # lattice of welded members has hundreds) changes nothing, and once
-                # they were all locked the search gave up
-                n = len(self.vertices)
-                e = np.c_[new_edges // n, new_edges % n]
-            at = self.vertices if kept is not None else v  # topo's numbering
-            bad.append((at[e[:, 0]] + at[e[:, 1]]) / 2.0)
-            how_far.append(np.full(len(e), np.inf))
+            bad.append((at[new_edges // len(at)] + at[new_edges % len(at)]) / 2.0)
+            how_far.append(np.full(len(new_edges), np.inf))
         where = np.concatenate(bad) if bad else np.zeros((0, 3))
         self.how_far = np.concatenate(how_far) if how_far else np.zeros(0)
         return Simplified(v, f, kept, max(there, back), flips, added), where

@@ -12,6 +12,7 @@ import json
 import struct
 from collections import defaultdict
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -224,6 +225,20 @@ def instance_transforms(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     return m[:, :3, 3].astype(np.float32), rotation.astype(np.float32), scale.astype(np.float32)
 
 
+class _GroupVisual(NamedTuple):
+    """One visual node of an asset's glTF at one LOD, for the placements showing it:
+    their matrices (k, 4, 4) and whether its mesh has morph targets (a node per
+    placement then, not one instanced node)."""
+
+    asset_id: str
+    lod: int
+    node: int
+    chain: list[int]
+    members: list[Placed]
+    matrices: np.ndarray
+    morphs: bool
+
+
 def lod_meshes(doc: dict, node_index: int) -> list[int]:
     """Mesh indices of a visual node's LOD chain: its own, then MSFT_lod's nodes."""
     node = doc["nodes"][node_index]
@@ -270,18 +285,19 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
                      "matrix": [float(v) for v in m.T.reshape(16)]} if not np.allclose(m, np.eye(4))
                     else {"name": f"terrain/{doc['nodes'][ni].get('name', ni)}", "mesh": mesh})
 
-    items = []  # (asset, lod, node index, chain, members, matrices (k, 4, 4), one node per placement?)
+    visuals = []
     for (asset_id, lod), members in sorted(groups.items()):
         doc = sources[asset_id][0]
         poses = [Z_TO_Y @ pl.pose @ Z_TO_Y.T for pl in members]
         for ni, local in visual_nodes(doc):
             chain = lod_meshes(doc, ni)[lod:] or lod_meshes(doc, ni)[-1:]
             morphs = any("targets" in p for p in doc["meshes"][chain[0]]["primitives"])
-            items.append((asset_id, lod, ni, chain, members, np.stack([p @ local for p in poses]), morphs))
-    instanced = [item[5] for item in items if not item[6]]
+            matrices = np.stack([p @ local for p in poses])
+            visuals.append(_GroupVisual(asset_id, lod, ni, chain, members, matrices, morphs))
+    instanced = [v.matrices for v in visuals if not v.morphs]
     transforms = instance_transforms(np.concatenate(instanced)) if instanced else None
     start = 0
-    for asset_id, lod, ni, chain, members, matrices, morphs in items:
+    for asset_id, lod, ni, chain, members, matrices, morphs in visuals:
         doc, binary = sources[asset_id]
         if morphs:
             _per_placement(sb, asset_id, lod, doc, binary, ni, chain, members, list(matrices))
