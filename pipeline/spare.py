@@ -25,12 +25,17 @@ B = TypeVar("B")
 T = TypeVar("T")
 
 
+def core_share() -> int:
+    """The cores this process was given (by the scheduler), at least 1."""
+    try:
+        return max(1, int(os.environ.get(SHARE_VARIABLE, "1")))
+    except ValueError:
+        return 1
+
+
 def cores_to_spare() -> bool:
     """Whether this process was given more than one core (by the scheduler)."""
-    try:
-        return int(os.environ.get(SHARE_VARIABLE, "1")) > 1
-    except ValueError:
-        return False
+    return core_share() > 1
 
 
 def beside(here: Callable[[], A], child: Callable[[], B]) -> tuple[A, B]:

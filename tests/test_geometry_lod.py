@@ -304,3 +304,73 @@ def test_a_fresh_miss_locks_a_narrow_neighbourhood_a_repeated_one_widens():
     again = lod._lock_around(judge, lock, miss, 5)
     assert len(again) == lod.LOCK_NEIGHBOURS and set(fresh) <= set(again)
     assert len(lod._lock_around(judge, lock, miss, 1)) == 8
+
+
+def _spheres(count: int, subdivisions: int, noise: float = 0.002):
+    """`count` noisy unit spheres in a row along X, each its own part: (v, f, part ids)."""
+    meshes = [lod.noisy_sphere(subdivisions, noise, seed=k) for k in range(count)]
+    v = np.concatenate([m[0] + (3.0 * k, 0.0, 0.0) for k, m in enumerate(meshes)])
+    offsets = np.cumsum([0] + [len(m[0]) for m in meshes[:-1]])
+    f = np.concatenate([m[1] + o for m, o in zip(meshes, offsets)])
+    return v, f, np.repeat(np.arange(count), [len(m[0]) for m in meshes])
+
+
+def test_pieces_take_every_face_once_and_cut_between_parts_where_there_are_several():
+    v, f, part = _spheres(8, 3)  # 8 x 1,280 faces
+    pieces = lod._pieces(v, f, 3000)
+    assert all(len(p) <= 3000 for p in pieces) and len(pieces) >= 4
+    assert np.array_equal(np.sort(np.concatenate(pieces)), np.arange(len(f)))
+    for p in pieces:  # whole spheres: no part is cut
+        assert np.all(np.bincount(part[f[p, 0]], minlength=8) % 1280 == 0)
+    moved = v.copy()
+    moved[1500] += (1e-4, 0.0, 0.0)  # a modeller's edit: the same pieces
+    assert all(np.array_equal(a, b) for a, b in zip(pieces, lod._pieces(moved, f, 3000)))
+
+    one_v, one_f = lod.noisy_sphere(5)  # 20,480 faces, one part: cut through it
+    through = lod._pieces(one_v, one_f, 6000)
+    assert len(through) == 4 and all(len(p) <= 6000 for p in through)
+    assert np.array_equal(np.sort(np.concatenate(through)), np.arange(len(one_f)))
+
+
+def test_an_edit_in_one_piece_searches_that_piece_alone(monkeypatch):
+    """Above PIECE_FACES a mesh is searched in pieces with a memo entry each: a vertex
+    moved in one sphere searches that sphere's levels again and recalls the others',
+    and the levels are those a search without memo gives."""
+    from pipeline import spare
+
+    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
+    monkeypatch.setattr(lod, "PIECE_FACES", 6000)
+    v, f, part = _spheres(4, 4)  # 4 x 5,120 faces: a piece each
+    budgets = [0.004, 0.012, 0.04]
+    memo = DictMemo()
+    before = lod.simplify_levels(v, f, budgets, parts=part, memo=memo)
+    assert len(memo.entries) == 12
+    moved = v.copy()
+    moved[np.flatnonzero(part == 2)[7]] += (2e-4, 0.0, 0.0)
+    hits = memo.hits
+    after = lod.simplify_levels(moved, f, budgets, parts=part, memo=memo)
+    assert memo.hits - hits == 9 and len(memo.entries) == 15
+    _same_levels(after, lod.simplify_levels(moved, f, budgets, parts=part))
+    for b, a in zip(before, after):
+        assert len(a.faces) < len(f)
+        same = [k for k in range(4) if k != 2]
+        assert np.array_equal(np.sort(b.kept[np.isin(part[b.kept], same)]), np.sort(a.kept[np.isin(part[a.kept], same)]))
+    for level, budget in zip(after, budgets):
+        assert level.error_m <= budget
+        assert metrics.hausdorff(moved, f, level.vertices, level.faces, samples=40000) <= budget
+
+
+def test_a_part_searched_in_pieces_stays_closed_and_within_budget(monkeypatch):
+    from pipeline import spare
+
+    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
+    monkeypatch.setattr(lod, "PIECE_FACES", 6000)
+    v, f = lod.noisy_sphere(5)  # one closed part of 20,480 faces, cut in 4 pieces
+    budgets = [0.005, 0.02]
+    levels = lod.simplify_levels(v, f, budgets)
+    assert len(levels[1].faces) < len(levels[0].faces) < len(f) // 2
+    for level, budget in zip(levels, budgets):
+        _, counts = C.edge_face_counts(level.faces)
+        assert np.all(counts == 2)  # the pieces' borders meet: no hole, no fin
+        assert level.flipped == 0 and level.error_m <= budget
+        assert metrics.hausdorff(v, f, level.vertices, level.faces, samples=40000) <= budget
