@@ -332,6 +332,30 @@ def test_pieces_take_every_face_once_and_cut_between_parts_where_there_are_sever
     assert np.array_equal(np.sort(np.concatenate(through)), np.arange(len(one_f)))
 
 
+def test_faces_added_in_one_place_change_one_piece():
+    """Cuts are at a median rounded to a grid, not at a face count: 64 faces more in
+    one place (a clean step keeping faces it dropped before) leave the other pieces
+    as they were."""
+    v, f = lod.noisy_sphere(5)
+    before = lod._pieces(v, f, 6000)
+    centroids = v[f].mean(axis=1)
+    middle = centroids[before[1]].mean(axis=0)  # of one piece, far from its borders
+    near = np.argsort(np.linalg.norm(centroids - middle / np.linalg.norm(middle), axis=1))[:32]
+    assert np.isin(near, before[1]).all()
+    centres = np.arange(len(v), len(v) + len(near))
+    a, b, c = f[near].T
+    split = np.concatenate([np.c_[a, b, centres], np.c_[b, c, centres], np.c_[c, a, centres]])
+    more_v = np.concatenate([v, centroids[near]])
+    more_f = np.concatenate([np.delete(f, near, axis=0), split])
+    after = lod._pieces(more_v, more_f, 6000)
+
+    def contents(vertices, faces, pieces):
+        return {np.sort(vertices[faces[p]].reshape(len(p), -1), axis=0).tobytes() for p in pieces}
+
+    assert len(before) == len(after) == 4
+    assert len(contents(v, f, before) & contents(more_v, more_f, after)) == 3
+
+
 def test_an_edit_in_one_piece_searches_that_piece_alone(monkeypatch):
     """Above PIECE_FACES a mesh is searched in pieces with a memo entry each: a vertex
     moved in one sphere searches that sphere's levels again and recalls the others',
