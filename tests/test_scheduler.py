@@ -155,7 +155,7 @@ def test_any_concurrent_futures_executor_runs_the_graph(src, tmp_path, jobs):
         toy_graph.tasks(src, out, delay=0.02))
     assert sorted(r.ran) == ["join", "upper:a", "upper:b"]
     assert (out / "joined.txt").read_text() == "ALPHA+BETA"
-    assert len(made) == 1 and made[0].workers.count == jobs and not made[0].workers.blender
+    assert len(made) == 1 and made[0].workers.count == jobs
     assert made[0].peak == jobs  # both upper tasks at once with two, one at a time with one
     assert Scheduler(out, jobs=jobs, executor=lambda w: made.append(w)).run(toy_graph.tasks(src, out)).ran == []
     assert len(made) == 1  # a no-op build starts no executor
@@ -216,30 +216,18 @@ def test_longest_task_starts_first(src, tmp_path, costly):
     assert (tmp_path / "build" / "joined.txt").read_text() == "ALPHA+BETA"
 
 
-def test_workers_import_bpy_only_for_a_task_that_will_run_and_reads_a_blend(src, tmp_path):
-    """A build whose tasks to run read no .blend (a metadata or floor-plan edit) starts
-    its workers without bpy, even though the graph has Blender tasks that are up to date."""
-    from pipeline.builder.graph import FileHasher, check_graph
-    from pipeline.builder.scheduler import Scheduler
+def test_a_worker_exits_before_the_exit_handlers_its_tasks_registered(tmp_path):
+    """bpy registers an exit handler when a worker's first read of a .blend imports it
+    (Blender's clean-up: a quarter of a second per worker, waited for at the end of
+    every build); the worker's own quick exit stays the last handler registered, so it
+    runs first and the others never do."""
+    from pipeline.builder.executors import Workers, local_pool, run_task
 
-    out = tmp_path / "build"
-
-    def graph():
-        tasks = toy_graph.tasks(src, out)
-        tasks[0].needs_blender = True  # upper:a stands for a geometry task reading a .blend
-        return check_graph(tasks)
-
-    def needs_bpy() -> bool:
-        sched = Scheduler(out)
-        state = sched._load_state()
-        return sched._worker_setup(graph(), state, FileHasher(state.get("hashes")))[1]
-
-    assert needs_bpy()  # cold: upper:a will run
-    Scheduler(out).run(graph())
-    (src / "b.txt").write_text("changed")
-    assert not needs_bpy()  # upper:b and join run; upper:a is up to date
-    (src / "a.txt").write_text("changed too")
-    assert needs_bpy()
+    marker = tmp_path / "marker"
+    pool = local_pool(Workers(count=1, threads=1))
+    out = pool.submit(run_task, toy_graph.register_exit_handler, {"marker": str(marker)}, str(tmp_path)).result()
+    pool.shutdown(wait=True)
+    assert out["ok"] and not marker.exists()
 
 
 def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypatch):
@@ -255,7 +243,7 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
     def share(jobs: int | None) -> int:
         sched = Scheduler(out, jobs=jobs)
         state = sched._load_state()
-        return sched._worker_setup(check_graph(toy_graph.tasks(src, out)), state, FileHasher(state.get("hashes")))[0]
+        return sched._worker_setup(check_graph(toy_graph.tasks(src, out)), state, FileHasher(state.get("hashes")))
 
     # cold: both upper tasks start at once; --jobs caps the cores the build may use
     assert (share(None), share(2), share(1)) == (2, 1, 1)
@@ -268,7 +256,7 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "1")  # the user's setting is kept
     monkeypatch.setenv(SHARE_VARIABLE, "1")  # restored after the test: init_worker sets it
-    init_worker(3, blender=False)
+    init_worker(3)
     assert (os.environ["IGL_NUM_THREADS"], os.environ["OMP_NUM_THREADS"], os.environ["OPENBLAS_NUM_THREADS"],
             os.environ[SHARE_VARIABLE]) == ("3", "3", "1", "3")
 
@@ -302,7 +290,7 @@ def test_build_given_fewer_cores_holds_its_workers_to_them(tmp_path):
     assert Scheduler(tmp_path / "b", jobs=1)._cpus() == (usable[0],)
     assert Scheduler(tmp_path / "b", jobs=len(usable))._cpus() == ()  # the whole machine: no affinity
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"), initializer=init_worker,
-                             initargs=(1, False, (usable[0],))) as pool:
+                             initargs=(1, (usable[0],))) as pool:
         assert pool.submit(_affinity).result() == [usable[0]]
 
 
@@ -321,7 +309,7 @@ def test_a_one_core_task_keeps_to_a_cpu_of_its_own(src, tmp_path):
 def test_init_worker_in_a_main_process_keeps_its_exit_code():
     """Workers skip the interpreter's exit clean-up (os._exit); a main process that
     calls init_worker (a test does) must still exit with its own code."""
-    code = "import sys; from pipeline.builder.executors import init_worker; init_worker(1, False); sys.exit(3)"
+    code = "import sys; from pipeline.builder.executors import init_worker; init_worker(1); sys.exit(3)"
     proc = subprocess.run([sys.executable, "-c", code], cwd=HERE.parent, timeout=120)
     assert proc.returncode == 3
 

@@ -36,6 +36,15 @@ def join(staging: Path, build: str, sep: str) -> dict:
     return {"parts": 2, "cores": os.environ.get(SHARE_VARIABLE), "cpus": _cpus()}
 
 
+def register_exit_handler(staging: Path, marker: str) -> dict:
+    """An action that, as importing bpy does, registers an exit handler: it would
+    write `marker` when its process exits normally."""
+    import atexit
+
+    atexit.register(Path(marker).write_text, "an exit handler of the task's ran")
+    return {}
+
+
 def _cpus() -> list[int] | None:
     """The CPUs the task's process may run on (None where the OS does not say)."""
     return sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None

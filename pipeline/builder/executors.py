@@ -37,12 +37,10 @@ class Workers:
 
     count:   tasks in flight at once (the scheduler never submits more);
     threads: cores each task may use for native thread pools and spare.beside;
-    blender: whether a task that will run reads a .blend (import bpy once per worker);
     cpus:    CPUs to hold the workers to, empty for no affinity."""
 
     count: int
     threads: int
-    blender: bool
     cpus: tuple[int, ...] = ()
 
 
@@ -72,6 +70,12 @@ def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict
             os.environ.pop(SHARE_VARIABLE, None)
         else:
             os.environ[SHARE_VARIABLE] = before
+        if _EXIT_FIRST:
+            # the task may have imported a library with exit handlers of its own (bpy,
+            # the first time a worker reads a .blend): this one stays the last
+            # registered, so it runs first
+            atexit.unregister(_exit_now)
+            atexit.register(_exit_now)
 
 
 def warm_up(modules: tuple[str, ...]) -> None:
@@ -100,24 +104,27 @@ def local_pool(workers: Workers) -> Executor:
     context = multiprocessing.get_context("spawn")
     slots = context.Value("i", 0)  # each worker takes the next: the CPU it keeps to on a one-core task
     return ProcessPoolExecutor(max_workers=workers.count, mp_context=context, initializer=init_worker,
-                               initargs=(workers.threads, workers.blender, workers.cpus, slots))
+                               initargs=(workers.threads, workers.cpus, slots))
 
 
 # In a pool worker: the CPUs of the build, and the one this worker keeps to when its
 # task has one core. None elsewhere (a task run in the calling process moves nothing).
 _CPUS: tuple[int, ...] | None = None
 _OWN_CPU: int | None = None
+# In a pool worker: _exit_now is registered, and kept the last exit handler (run_task).
+_EXIT_FIRST = False
 
 
-def init_worker(threads: int, blender: bool, cpus: tuple[int, ...] = (), slots=None) -> None:
+def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None) -> None:
     """Worker initializer. Each worker's native thread pools get its share of the cores
     (N workers each running as many threads as there are cores only trade places);
     a variable the user set is kept. `cpus`: the CPUs a build given fewer cores than
     the machine is held to (fcpw starts a thread per core it sees, whatever the
     variables say). `slots`: a shared counter from which the worker takes the CPU it
-    keeps to while its task has a single core (see _hold_to). A worker that will read
-    .blend files pays bpy's import once, not once per task."""
-    global _CPUS, _OWN_CPU
+    keeps to while its task has a single core (see _hold_to). bpy is imported by the
+    first read of a .blend in a worker, not here: a worker that reads none (the
+    source, geometry and package tasks of an edit's chain) never pays its 0.45 s."""
+    global _CPUS, _OWN_CPU, _EXIT_FIRST
     if cpus:
         os.sched_setaffinity(0, cpus)
     if slots is not None and hasattr(os, "sched_getaffinity"):
@@ -128,20 +135,16 @@ def init_worker(threads: int, blender: bool, cpus: tuple[int, ...] = (), slots=N
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, str(threads))
     os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (spare.beside)
-    if blender:
-        try:
-            import bpy  # noqa: F401
-        except ImportError:
-            pass
-    # Registered after bpy's own, so it runs first: Blender's exit clean-up costs a
-    # quarter of a second per worker, and tearing down the interpreter's modules a
-    # tenth without it, and the build waits for both. By then the worker has handed
-    # back every result (multiprocessing flushes its queues before). Only in a
-    # worker: a main process keeps its exit code.
+    # Kept after bpy's own exit handler (run_task), so it runs first: Blender's exit
+    # clean-up costs a quarter of a second per worker, and tearing down the
+    # interpreter's modules a tenth without it, and the build waits for both. By then
+    # the worker has handed back every result (multiprocessing flushes its queues
+    # before). Only in a worker: a main process keeps its exit code.
     import multiprocessing
 
     if multiprocessing.parent_process() is not None:
         atexit.register(_exit_now)
+        _EXIT_FIRST = True
 
 
 def _hold_to(cores: int) -> None:

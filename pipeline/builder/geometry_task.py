@@ -9,9 +9,10 @@ from pathlib import Path
 from .. import config
 from .layout import ir_path, source_path
 
-# what build_geometry imports (mostly inside functions): 0.22-0.25 s in a fresh worker
+# what build_geometry imports (mostly inside functions): 0.22-0.25 s in a fresh worker,
+# and jsonschema (0.08 s) for asset.toml's check
 WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
-        "pipeline.validate.checks", "scipy.spatial", "fcpw", "igl", "meshoptimizer")
+        "pipeline.validate.checks", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
 
 
 def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:

@@ -128,7 +128,6 @@ class Task:
     params: Any = None
     code: str = ""
     outputs: tuple[str, ...] = ()
-    needs_blender: bool = False
     cost: float = 0.0  # expected work (any unit): longer tasks start first; not in the key
     warm: tuple[str, ...] = ()  # modules to import ahead in an idle worker; not in the key
     key: str = ""

@@ -6,8 +6,7 @@
   (graph.output_digest), so a rerun that made the same bytes stops there.
 - Tasks run on an executor (builder.executors; by default a pool of spawned
   workers that serve many tasks each); the scheduler tells it how many tasks run at
-  once, each one's share of the cores, and whether a task that will run reads a
-  .blend (`_worker_setup`).
+  once and each one's share of the cores (`_worker_setup`).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
@@ -127,15 +126,12 @@ class Scheduler:
                     folder.rmdir()
         return meta
 
-    def _worker_setup(self, order: list[Task], state: dict, hasher: FileHasher) -> tuple[int, bool]:
-        """What the workers are started with, from the tasks this build will run:
-        (cores per worker for native thread pools and spare.beside, whether they
-        import bpy). The cores are split among the tasks that can start side by side:
-        an edit that reruns one asset's chain gives its task every core of the build's
-        share, a cold build gives each worker its part of it. bpy (a second or so per
-        worker) only when a task that will run reads a .blend: an edit of an asset's
-        metadata or of the floor plan reads none. A task after one that will run is
-        counted as running too (whether it is cut off is known only then)."""
+    def _worker_setup(self, order: list[Task], state: dict, hasher: FileHasher) -> int:
+        """The cores per worker for native thread pools and spare.beside, from the
+        tasks this build will run: split among the tasks that can start side by side.
+        An edit that reruns one asset's chain gives its task every core of the build's
+        share, a cold build gives each worker its part of it. A task after one that
+        will run is counted as running too (whether it is cut off is known only then)."""
         digests: dict[str, str] = {}
         stale, names = [], set()
         for t in order:
@@ -153,7 +149,7 @@ class Scheduler:
                 stale.append(t)
                 names.add(t.name)
         width = sum(1 for t in stale if not names.intersection(t.deps))
-        return max(1, self.cores // max(1, min(self.jobs, width))), any(t.needs_blender for t in stale)
+        return max(1, self.cores // max(1, min(self.jobs, width)))
 
     def _cpus(self) -> tuple[int, ...]:
         """The CPUs the workers are held to: the first `cores` this process may use
@@ -176,7 +172,7 @@ class Scheduler:
             pending = {t.name: t for t in order}
             done: set[str] = set()
             running: dict[Future, Task] = {}
-            warming: list[Future] = []  # warm-ups sent to idle workers (_warm_idle)
+            warming: list[tuple[Future, tuple[str, ...]]] = []  # warm-ups sent to idle workers (_warm_idle)
             pool = None
             try:
                 while pending or running:
@@ -215,8 +211,8 @@ class Scheduler:
                             pending[name] = task  # its turn comes when a worker is free
                             continue
                         if pool is None:
-                            threads, needs_bpy = self._worker_setup(order, state, hasher)
-                            pool = self.executor(Workers(self.jobs, threads, needs_bpy, self._cpus()))
+                            threads = self._worker_setup(order, state, hasher)
+                            pool = self.executor(Workers(self.jobs, threads, self._cpus()))
                         staging = self.build / ".staging" / task.key
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)
@@ -227,7 +223,7 @@ class Scheduler:
                         cores = self.cores if alone else threads
                         running[pool.submit(run_task, task.action, task.args, str(staging), cores)] = task
                     if pool is not None:
-                        self._warm_idle(pool, running, warming, pending)
+                        self._warm_idle(pool, running, warming, pending, done)
                     if not running:
                         if pending:  # everything left waits on a failed task
                             continue
@@ -264,17 +260,23 @@ class Scheduler:
                 report.cache = self.cache.prune(self.cache_limit, {e["key"] for e in state["tasks"].values()})
         return report
 
-    def _warm_idle(self, pool, running: dict, warming: list[Future], pending: dict[str, Task]) -> None:
+    def _warm_idle(self, pool, running: dict, warming: list[tuple[Future, tuple[str, ...]]],
+                   pending: dict[str, Task], done: set[str]) -> None:
         """Workers left idle while the tasks still waiting depend on running ones import
-        what those will (Task.warm): an edit runs its chain task by task, and each task
-        would otherwise start in a worker that has not imported its libraries. A pool
-        hands the next call to the worker that has waited longest, so the idle worker
-        warmed now is the one the next task goes to. A build sends no more warm-ups
-        than it has workers."""
-        idle = min(self.jobs - len(running) - sum(not f.done() for f in warming), self.jobs - len(warming))
-        modules = tuple(dict.fromkeys(m for t in pending.values() for m in t.warm))
-        for _ in range(max(0, idle) if modules else 0):
-            warming.append(pool.submit(warm_up, modules))
+        what the next of those will (Task.warm: of the tasks that wait on running ones
+        alone): an edit runs its chain task by task, and each task would otherwise start
+        in a worker that has not imported its libraries. A pool hands the next call to
+        the worker that has waited longest, so the idle worker warmed now is the one the
+        next task goes to. Each set of modules is sent once. Warming every waiting
+        task's modules at once kept the idle worker busy past the next task's start:
+        the source task of an edit ran in the worker that had just read the .blend,
+        importing its own libraries."""
+        idle = self.jobs - len(running) - sum(not f.done() for f, _ in warming)
+        started = done | {t.name for t in running.values()}
+        modules = tuple(dict.fromkeys(m for t in pending.values() if started.issuperset(t.deps) for m in t.warm))
+        if idle <= 0 or not modules or any(sent == modules for _, sent in warming):
+            return
+        warming += [(pool.submit(warm_up, modules), modules) for _ in range(idle)]
 
     def _finish(self, state: dict, task: Task, digests: dict, meta: dict, report: BuildReport) -> None:
         entry = record(task, digests, meta["files"])

@@ -190,7 +190,6 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             params={"asset": asset_id, "asset.toml": source_params(cfg)},
             code=source_code,
             outputs=(f"{SOURCE_FOLDER}/{asset_id}/",),
-            needs_blender=source.suffix.lower() == ".blend",
             cost=cost,  # its chain's: the longest chains start first
         ))
         p.tasks.append(Task(
