@@ -33,6 +33,20 @@ def test_unreadable_entries_are_misses(tmp_path):
     assert memo.get("objects") is None
 
 
+def test_an_entry_cut_short_or_claiming_more_than_it_holds_is_a_miss(tmp_path):
+    import json
+
+    memo = ArrayMemo(tmp_path, "ns")
+    memo.put("k", {"codes": np.array(["GEOM003", "GEOM10"], dtype=np.str_), "x": np.arange(5)})
+    assert memo.get("k")["codes"].tolist() == ["GEOM003", "GEOM10"]
+    path = memo.path("k")
+    path.write_bytes(path.read_bytes()[:-3])
+    assert memo.get("k") is None
+    header = json.dumps([["x", "<f8", [10**6, 10**6]]]).encode()  # 8 TB, in 8 bytes
+    path.write_bytes(ArrayMemo.MAGIC + len(header).to_bytes(8, "little") + header + bytes(8))
+    assert memo.get("k") is None
+
+
 def test_a_killed_write_leaves_a_temporary_file_the_next_build_sweeps(tmp_path):
     (tmp_path / ".tmp-0123.npz").write_bytes(b"half")
     (tmp_path / ".tmp-entry").mkdir()

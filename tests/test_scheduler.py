@@ -390,6 +390,39 @@ def test_pruning_drops_the_least_recently_used_first_and_counts_linked_files_onc
     assert cache.has("aa01") and cache.has("aa02") and (memo / "linked").is_file()
 
 
+def test_the_cache_is_walked_only_when_what_it_holds_may_be_over_its_limit(tmp_path):
+    """A walk leaves the cache's total; entries and memo files stored after add their
+    bytes to it (an upper bound of what the next walk finds), and pruning walks again
+    only when that total is over the limit."""
+    import numpy as np
+
+    from pipeline.builder.cache import Cache
+    from pipeline.builder.memo import ArrayMemo
+
+    cache = Cache(tmp_path / "cache")
+
+    def put(key: str, size: int) -> None:
+        staging = tmp_path / f"staging-{key}"
+        staging.mkdir()
+        (staging / "f.bin").write_bytes(b"x" * size)
+        cache.put(key, staging, {})
+
+    put("aa01", 1000)
+    with cache.in_use():
+        first = cache.prune(limit=100_000, keep=set())
+    assert first["walked"] and first["bytes"] > 1000
+    put("aa02", 2000)
+    ArrayMemo(cache.root, "namespace").put("key", {"a": np.zeros(100)})
+    with cache.in_use():
+        second = cache.prune(limit=100_000, keep=set())
+    assert not second["walked"] and second["bytes"] >= first["bytes"] + 2000 + 800
+    with cache.in_use():  # a byte less: a walk, which finds the total exact (no file is linked)
+        third = cache.prune(limit=second["bytes"] - 1, keep={"aa01", "aa02"})
+    assert third["walked"] and third["bytes"] == second["bytes"] and third["removed"] == 1  # the memo file
+    with cache.in_use():
+        assert not cache.prune(limit=third["bytes"] - third["freed"], keep=set())["walked"]
+
+
 def test_pruning_waits_for_a_cache_no_other_build_uses(tmp_path):
     from pipeline.builder.cache import Cache
 

@@ -9,24 +9,24 @@ Entries live under the hash of the step's key and the code version the caller na
 temporary name in the cache's root (which `Cache.clean_tmp` sweeps) and renamed into
 place: a killed build leaves whole entries or none.
 
-- ArrayMemo: .npz files of plain arrays, read without pickles. An entry that cannot
-  be read is a miss, and the step's result, computed again, replaces it.
+- ArrayMemo: plain numeric arrays in a file of their own layout (below), read
+  without pickles. An entry that cannot be read is a miss, and the step's result,
+  computed again, replaces it.
 - FileMemo: files a step wrote, kept as hard links to them (see there).
 """
 
 from __future__ import annotations
 
 import hashlib
-import io
+import json
 import os
 import uuid
-import zipfile
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from .cache import MEMO_FOLDER
+from .cache import MEMO_FOLDER, add_usage
 
 
 class _Memo:
@@ -52,7 +52,9 @@ class _Memo:
         try:
             final.parent.mkdir(parents=True, exist_ok=True)
             make(tmp)
+            size = tmp.stat().st_size
             os.replace(tmp, final)
+            add_usage(self.root, size)
         except OSError:
             try:
                 tmp.unlink(missing_ok=True)
@@ -61,14 +63,19 @@ class _Memo:
 
 
 class ArrayMemo(_Memo):
-    suffix = ".npz"
+    """Each entry one file: MAGIC, the header's length (8 bytes, little-endian), the
+    header (JSON: [name, dtype, shape] per array) and the arrays' bytes in that order.
+    An edit's geometry and package tasks read about 200 entries: as .npz files, whose
+    headers numpy parses with ast, that was 0.3 ms each; this is 0.03 ms."""
+
+    suffix = ".arrays"
+    MAGIC = b"TWINARR1"
 
     def get(self, key: str) -> dict[str, np.ndarray] | None:
         path = self.path(key)
         try:
-            with np.load(io.BytesIO(path.read_bytes()), allow_pickle=False) as npz:
-                arrays = {name: npz[name] for name in npz.files}
-        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+            arrays = _unpack(bytearray(path.read_bytes()), self.MAGIC)
+        except (OSError, ValueError, TypeError, KeyError, IndexError):
             return None
         self.hits += 1
         _used(path)
@@ -76,9 +83,35 @@ class ArrayMemo(_Memo):
 
     def put(self, key: str, arrays: dict[str, np.ndarray]) -> None:
         self.puts += 1
-        buffer = io.BytesIO()
-        np.savez(buffer, **arrays)
-        self._place(self.path(key), lambda tmp: tmp.write_bytes(buffer.getvalue()))
+        parts = {name: np.ascontiguousarray(a) for name, a in arrays.items()}
+        if any(a.dtype.kind not in _PLAIN for a in parts.values()):
+            return  # objects would be pickles: nothing is kept, the step computes again
+        header = json.dumps([[name, a.dtype.str, list(a.shape)] for name, a in parts.items()]).encode()
+        data = b"".join([self.MAGIC, len(header).to_bytes(8, "little"), header] + [a.tobytes() for a in parts.values()])
+        self._place(self.path(key), lambda tmp: tmp.write_bytes(data))
+
+
+_PLAIN = "biufU"  # dtype kinds an entry holds: numbers, booleans, fixed-width text
+
+
+def _unpack(data: bytearray, magic: bytes) -> dict[str, np.ndarray]:
+    """ArrayMemo's layout read back; ValueError for anything that does not fit it
+    (plain arrays only: nothing in an entry becomes an object)."""
+    if data[:len(magic)] != magic:
+        raise ValueError("not an array memo entry")
+    start = len(magic) + 8
+    end = start + int.from_bytes(data[len(magic):start], "little")
+    offset, arrays = end, {}
+    for name, dtype, shape in json.loads(bytes(data[start:end])):
+        dtype = np.dtype(dtype)
+        if dtype.kind not in _PLAIN or any(not isinstance(n, int) or n < 0 for n in shape):
+            raise ValueError(f"array {name!r}: {dtype}, {shape}")
+        count = int(np.prod(shape, dtype=np.int64))
+        arrays[str(name)] = np.frombuffer(data, dtype, count, offset).reshape(shape)
+        offset += count * dtype.itemsize
+    if offset != len(data):
+        raise ValueError("array memo entry of the wrong length")
+    return arrays
 
 
 class FileMemo(_Memo):

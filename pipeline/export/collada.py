@@ -24,6 +24,7 @@ from pipeline import ir
 from pipeline.digest import sha256_json
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.geometry.metrics import vertex_normals
 
 # pycollada stamps <created>/<modified> with the current time; a fixed date keeps two
 # builds of the same inputs byte-identical.
@@ -129,7 +130,9 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
 def _sources(ident: str, mesh: ir.Mesh):
     """Positions, normals (computed when absent) and texcoords, all per vertex, so one
     index per corner serves every input (same offset)."""
-    normals = mesh.normals if mesh.normals is not None else _vertex_normals(mesh.vertices, mesh.faces)
+    normals = mesh.normals
+    if normals is None:  # +Z where no face gives a direction: validators reject non-unit normals
+        normals = vertex_normals(mesh.vertices, mesh.faces, unused=(0.0, 0.0, 1.0))
     streams = [("VERTEX", f"{ident}-positions", mesh.vertices, ("X", "Y", "Z")),
                ("NORMAL", f"{ident}-normals", normals, ("X", "Y", "Z"))]
     if mesh.uvs is not None:
@@ -158,26 +161,6 @@ def _phong_material(doc, material: ir.Material):
     doc.effects.append(effect)
     doc.materials.append(mat)
     return mat
-
-
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Smooth normals: area-weighted sum of the face normals around each vertex.
-
-    vertices: (n, 3) float64, faces: (m, 3) int -> (n, 3) float64 unit vectors; a vertex
-    with no area around it gets +Z so the file never holds NaN.
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    out = np.zeros_like(v)
-    if len(f):
-        face_n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # length = 2 * area
-        for corner in range(3):
-            np.add.at(out, f[:, corner], face_n)
-    length = np.linalg.norm(out, axis=1)
-    ok = length > 1e-300
-    out[ok] /= length[ok, None]
-    out[~ok] = (0.0, 0.0, 1.0)
-    return out
 
 
 def _reformat_floats(root, arrays: dict[str, np.ndarray]) -> None:

@@ -33,6 +33,7 @@ import numpy as np
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.geometry.metrics import vertex_normals
 from pipeline.geometry.transform import decompose, quaternion_from_matrix
 
 # Z up -> Y up: (x, y, z) -> (x, z, -y). A proper rotation, so winding is unchanged.
@@ -251,7 +252,9 @@ def _add_mesh(doc: _Doc, name: str, m: ir.Mesh, material: int, mappings: list[di
     if len(m.faces) == 0 or len(m.vertices) == 0:
         return None
     positions = (np.asarray(m.vertices, dtype=np.float64) @ _C.T).astype(np.float32)
-    normals = m.normals if m.normals is not None else _vertex_normals(m.vertices, m.faces)
+    normals = m.normals
+    if normals is None:  # +Z where no face gives a direction: validators reject non-unit normals
+        normals = vertex_normals(m.vertices, m.faces, unused=(0.0, 0.0, 1.0))
     normals = np.asarray(normals, dtype=np.float64) @ _C.T
     normals = (normals / np.linalg.norm(normals, axis=1, keepdims=True)).astype(np.float32)
     attributes = {
@@ -280,21 +283,6 @@ def _add_mesh(doc: _Doc, name: str, m: ir.Mesh, material: int, mappings: list[di
         primitive["extensions"] = {"KHR_materials_variants": {"mappings": mappings}}
     doc.meshes.append(mesh)
     return len(doc.meshes) - 1
-
-
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(n, 3) area-weighted smooth vertex normals; +Z where no face gives a direction,
-    so every normal stays a unit vector (the validator rejects others)."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    out = np.zeros_like(v)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    for k in range(3):
-        np.add.at(out, f[:, k], fn)
-    length = np.linalg.norm(out, axis=1)
-    out[length == 0.0] = (0.0, 0.0, 1.0)
-    length[length == 0.0] = 1.0
-    return out / length[:, None]
 
 
 # ---------------------------------------------------------------- materials

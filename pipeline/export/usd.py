@@ -33,6 +33,7 @@ import numpy as np
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.geometry.metrics import vertex_normals
 from pipeline.geometry.transform import compose, quaternion_from_matrix
 
 _LOOKS = "Looks"
@@ -203,7 +204,9 @@ def _author_mesh_data(p, mesh, m: ir.Mesh) -> None:
     mesh.CreatePointsAttr(p.Vt.Vec3fArray.FromNumpy(pts))
     mesh.CreateFaceVertexCountsAttr(p.Vt.IntArray.FromNumpy(np.full(len(m.faces), 3, dtype=np.int32)))
     mesh.CreateFaceVertexIndicesAttr(p.Vt.IntArray.FromNumpy(np.ascontiguousarray(m.faces.reshape(-1), dtype=np.int32)))
-    normals = m.normals if m.normals is not None else _vertex_normals(m.vertices, m.faces)
+    normals = m.normals
+    if normals is None:  # +Z where no face gives a direction: validators reject non-unit normals
+        normals = vertex_normals(m.vertices, m.faces, unused=(0.0, 0.0, 1.0))
     mesh.CreateNormalsAttr(p.Vt.Vec3fArray.FromNumpy(np.asarray(normals, dtype=np.float32)))
     mesh.SetNormalsInterpolation(p.UsdGeom.Tokens.vertex)
     if m.uvs is not None:
@@ -212,22 +215,6 @@ def _author_mesh_data(p, mesh, m: ir.Mesh) -> None:
         st.Set(p.Vt.Vec2fArray.FromNumpy(np.asarray(m.uvs, dtype=np.float32)))
     lo, hi = (pts.min(axis=0), pts.max(axis=0)) if len(pts) else (np.zeros(3), np.zeros(3))
     mesh.CreateExtentAttr(p.Vt.Vec3fArray([p.Gf.Vec3f(*map(float, lo)), p.Gf.Vec3f(*map(float, hi))]))
-
-
-def _vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(n, 3) area-weighted smooth vertex normals; +Z for vertices no face touches (or
-    only degenerate faces), so every normal stays a unit vector."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    out = np.zeros_like(v)
-    if len(f):
-        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-        for k in range(3):
-            np.add.at(out, f[:, k], fn)
-    length = np.linalg.norm(out, axis=1)
-    out[length == 0.0] = (0.0, 0.0, 1.0)
-    length[length == 0.0] = 1.0
-    return out / length[:, None]
 
 
 def _author_shape_keys(p, stage, visual_path, mesh, m: ir.Mesh) -> None:
