@@ -834,9 +834,9 @@ def _run_searches(searches: list[_PieceSearch], iterations: int) -> None:
     pieces one after the other in a process of its own. The memo is written here, so
     its counts are this process's."""
     todo = [s for s in searches if not s.done]
-    if len(todo) == 1:
-        todo[0].keep(todo[0].search(iterations, side_by_side=True))
     if len(todo) <= 1:
+        for search in todo:
+            search.keep(search.search(iterations, side_by_side=True))
         return
     bins: list[list[_PieceSearch]] = [[] for _ in range(max(1, min(core_share(), len(todo))))]
     load = [0] * len(bins)
