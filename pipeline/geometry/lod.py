@@ -56,7 +56,8 @@ WIDESPREAD = 0.02
 # simplify+measure rounds per level at most, and the widest lock around one miss
 ITERATIONS = 10
 LOCK_NEIGHBOURS = 64
-# A welded mesh of more faces is searched in pieces of at most this many (_pieces).
+# A welded mesh of more than twice this many faces is searched in pieces of at most
+# this many (_pieces).
 PIECE_FACES = 16_384
 
 
@@ -668,15 +669,17 @@ def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: 
     welding together. The mesh is welded and indexed once for all budgets, which are
     searched side by side when the worker has cores to spare (`_search_levels`).
 
-    A welded mesh of more than PIECE_FACES faces is searched in pieces (`_pieces`:
-    whole parts where it has several), each with its share of the query points and
-    its border locked, and the pieces' levels joined (`_joined_levels`). Each piece
-    has its own memo keys, so a vertex moved in one place searches one piece again.
-    Against one search over the whole (the 17 built sample assets, one core): 38.6 ->
-    30.6 s, and faces at LOD1, LOD2 and LOD3 -14 %, +2 % and -1 %: fewer rounds fix
-    one piece's misses than the whole's, and a round measures as many points. A piece
-    judges non-manifold edges per part within it, where the whole let one region of a
-    visual pay for another (lightning_mast: 9,316 -> 21,693 faces at every level).
+    A welded mesh of more than 2 * PIECE_FACES faces is searched in pieces of at most
+    PIECE_FACES (`_pieces`: whole parts where it has several), each with its share of
+    the query points and its border locked, and the pieces' levels joined
+    (`_joined_levels`). Each piece has its own memo keys, so a vertex moved in one
+    place searches one piece again. Against one search over every mesh (the 17 built
+    sample assets, one core): 38.6 -> 32.5 s, and faces at LOD1, LOD2 and LOD3 -16 %,
+    -4 % and -9 %: fewer rounds fix one piece's misses than the whole's, and a round
+    measures as many points. Splitting every mesh over PIECE_FACES cost lightning_mast
+    (30,608 faces) 9,316 -> 21,693 faces at every level: a piece judges non-manifold
+    edges per part within it, where the whole let one region of a visual pay for
+    another.
 
     `memo` (meshoptimizer only): each level's search result is kept there under the
     hash of everything it depends on (the welded piece, its locked border, samples,
@@ -861,8 +864,12 @@ def _pieces(vertices: np.ndarray, faces: np.ndarray, limit: int) -> list[np.ndar
     makes 96 faces the clean step dropped as degenerate a surface again, and cuts at
     the middle count moved all four pieces of that part and four more (24 of 33
     levels searched again). Now a vertex moved, or a few faces more or less, in one
-    place changes the piece there, and the other pieces' levels come from the memo."""
-    if len(faces) <= limit:
+    place changes the piece there, and the other pieces' levels come from the memo.
+
+    A mesh of up to two pieces' worth is not split: halving an edit's search was not
+    worth lightning_mast's loss (see simplify_levels), even against post_insulator's
+    and surge_arrester's gains of 984 and 3,070 faces at LOD1."""
+    if len(faces) <= 2 * limit:
         return [np.arange(len(faces))]
     from scipy import sparse
     from scipy.sparse import csgraph
