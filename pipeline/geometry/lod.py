@@ -965,10 +965,10 @@ def _joined_levels(vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray | 
     side may make a face on a border edge that is manifold on its own side: such a
     level gives those pieces their finer levels back until no part has more
     non-manifold edges than as authored. None: no piece has a coarser level there."""
-    attrs = [] if parts is None else [(np.asarray(parts, dtype=np.float64)[:, None], 0.5)]
-    topology = _clean.weld_map(vertices, _clean.weld_tolerance(vertices), attrs)
+    # `vertices` is simplify_levels' weld already (per part): welding it again, as the
+    # judge does its unwelded inputs, would map every vertex to itself
     part = np.zeros(len(vertices), np.int64) if parts is None else np.unique(parts, return_inverse=True)[1]
-    allowed = _part_non_manifold(topology, part, faces)[0]
+    allowed = _part_non_manifold(part, faces)[0]
     owners = [_clean.compact(faces[ids], len(vertices))[0] for ids in pieces]
     finer = [faces[ids] for ids in pieces]  # each piece's current level on the whole's vertices
     finer_error = [0.0] * len(pieces)
@@ -978,7 +978,7 @@ def _joined_levels(vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray | 
                   for used, s in zip(owners, searches)]
         while True:
             corners = [c[0] if c is not None else f for c, f in zip(chosen, finer)]
-            bad = _added_non_manifold(topology, part, np.concatenate(corners), allowed)
+            bad = _added_non_manifold(part, np.concatenate(corners), allowed)
             piece_of_face = np.repeat(np.arange(len(pieces)), [len(c) for c in corners])
             culprits = {int(k) for k in piece_of_face[bad]} & {k for k, c in enumerate(chosen) if c is not None}
             if not culprits:
@@ -996,25 +996,24 @@ def _joined_levels(vertices: np.ndarray, faces: np.ndarray, parts: np.ndarray | 
     return out
 
 
-def _part_non_manifold(topology: np.ndarray, part: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(how many non-manifold edges each part has (parts,), their keys) of `faces`
-    judged on `topology` (the weld), as _Judge counts them."""
-    n = len(topology)
-    keys = _clean.non_manifold_edge_keys(topology[faces], n)
+def _part_non_manifold(part: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(how many non-manifold edges each part has (parts,), their keys) of `faces` on
+    welded vertices whose parts are `part: (n,)`, as _Judge counts them."""
+    n = len(part)
+    keys = _clean.non_manifold_edge_keys(faces, n)
     return np.bincount(part[keys // n], minlength=int(part.max(initial=0)) + 1), keys
 
 
-def _added_non_manifold(topology: np.ndarray, part: np.ndarray, faces: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+def _added_non_manifold(part: np.ndarray, faces: np.ndarray, allowed: np.ndarray) -> np.ndarray:
     """Ids of the faces on the non-manifold edges of the parts that have more such
     edges than `allowed` (per part) in `faces`."""
-    counts, keys = _part_non_manifold(topology, part, faces)
+    counts, keys = _part_non_manifold(part, faces)
     grown = counts - allowed
     if not (grown > 0).any():
         return np.zeros(0, dtype=np.int64)
-    n = len(topology)
+    n = len(part)
     keys = keys[grown[part[keys // n]] > 0]
-    topo = topology[faces]
-    face_edges = np.sort(np.concatenate([topo[:, [0, 1]], topo[:, [1, 2]], topo[:, [2, 0]]]), axis=1)
+    face_edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     on_bad = np.isin(face_edges[:, 0] * n + face_edges[:, 1], keys)
     return np.unique(np.nonzero(on_bad)[0] % len(faces))
 
