@@ -89,21 +89,22 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     out = Path(staging) / "scene"
     out.mkdir(parents=True, exist_ok=True)
 
-    def sdf_usd_and_checks():
+    def sdf_and_usd():
         world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
                         terrain_model=tname, sun=sun)
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
                         articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
+
+    def gltf_and_checks():
+        scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
+                         origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
         terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
         return check_placements(site, fp, placed, manifests, terrain_z)
 
-    def gltf():
-        scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
-                         origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
-
-    # the glTF scene (the largest share) beside the rest, when a core is spare
-    findings, _ = beside(sdf_usd_and_checks, gltf)
+    # two halves of about equal cost (USD the largest part of one, glTF of the
+    # other) side by side, when a core is spare
+    _, findings = beside(sdf_and_usd, gltf_and_checks)
     lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     record = {
         "site": site.name, "crs": site.crs,

@@ -10,6 +10,7 @@ Each finding is a dict {code, severity, site, message}, sorted for stable report
 from __future__ import annotations
 
 from collections import Counter
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,25 +47,68 @@ def points_in_polygon(points: np.ndarray, poly: np.ndarray) -> np.ndarray:
     return on_edge | (crossings % 2 == 1)
 
 
-def footprint(pose: np.ndarray, bounds) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
-    """Oriented footprint: (4, 2) ENU corners, (2, 2) unit edge axes, z interval."""
-    lo, hi = np.asarray(bounds[0]), np.asarray(bounds[1])
-    corners = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]])
-    r = pose[:2, :2]
-    pts = corners @ r.T + pose[:2, 3]
-    z = (pose[2, 3] + lo[2], pose[2, 3] + hi[2])
-    return pts, r.T, z
+class Footprints(NamedTuple):
+    """Oriented footprints of n placements: corners (n, 4, 2) ENU, unit edge axes
+    (n, 2, 2) (row k the k-th axis), z intervals (n, 2)."""
+
+    corners: np.ndarray
+    axes: np.ndarray
+    z: np.ndarray
+
+    def take(self, index: np.ndarray) -> Footprints:
+        return Footprints(self.corners[index], self.axes[index], self.z[index])
 
 
-def penetration(a, b) -> float:
-    """Smallest overlap depth of two oriented boxes along the separating axes
-    (2D edges of both footprints, and z); <= 0 when they do not overlap."""
-    depth = min(a[2][1], b[2][1]) - max(a[2][0], b[2][0])
-    for axes in (a[1], b[1]):
-        for ax in axes:
-            pa, pb = a[0] @ ax, b[0] @ ax
-            depth = min(depth, min(pa.max(), pb.max()) - max(pa.min(), pb.min()))
-    return float(depth)
+def footprints(poses: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Footprints:
+    """poses: (n, 4, 4); lo, hi: (n, 3) model-frame bounds of each placement's model."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    lo, hi = np.asarray(lo, dtype=np.float64).reshape(-1, 3), np.asarray(hi, dtype=np.float64).reshape(-1, 3)
+    corners = np.stack([lo[:, :2], np.c_[hi[:, 0], lo[:, 1]], hi[:, :2], np.c_[lo[:, 0], hi[:, 1]]], axis=1)
+    r = poses[:, :2, :2]
+    axes = r.transpose(0, 2, 1)
+    pts = corners @ axes + poses[:, None, :2, 3]
+    z = poses[:, 2, 3:4] + np.c_[lo[:, 2], hi[:, 2]]
+    return Footprints(pts, axes, z)
+
+
+def footprint(pose: np.ndarray, bounds) -> Footprints:
+    """One placement's footprint (footprints with n = 1)."""
+    return footprints(pose, bounds[0], bounds[1])
+
+
+def penetrations(a: Footprints, b: Footprints) -> np.ndarray:
+    """Smallest overlap depth of each pair of oriented boxes a[k], b[k] along the
+    separating axes (2D edges of both footprints, and z); <= 0 where they do not
+    overlap. Returns (n,)."""
+    depth = np.minimum(a.z[:, 1], b.z[:, 1]) - np.maximum(a.z[:, 0], b.z[:, 0])
+    for axes in (a.axes, b.axes):
+        for k in range(2):
+            ax = axes[:, k, None, :]  # (n, 1, 2) against the (n, 4, 2) corners
+            pa, pb = (a.corners * ax).sum(axis=2), (b.corners * ax).sum(axis=2)
+            overlap = np.minimum(pa.max(axis=1), pb.max(axis=1)) - np.maximum(pa.min(axis=1), pb.min(axis=1))
+            depth = np.minimum(depth, overlap)
+    return depth
+
+
+def penetration(a: Footprints, b: Footprints) -> float:
+    """penetrations of one pair."""
+    return float(penetrations(a, b)[0])
+
+
+def box_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index pairs (i, j), i != j each pair once, of the axis-aligned boxes lo, hi:
+    (n, 2) that meet: a sweep along x (each box against those starting before it
+    ends), then the y ranges."""
+    order = np.argsort(lo[:, 0], kind="stable")
+    starts = lo[order, 0]
+    ends = np.searchsorted(starts, hi[order, 0], side="right")  # > its own position
+    first = np.arange(1, len(order) + 1)
+    counts = np.maximum(ends - first, 0)
+    i = np.repeat(order, counts)
+    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+    j = order[np.repeat(first, counts) + offsets]
+    meet = (lo[j, 1] <= hi[i, 1]) & (lo[i, 1] <= hi[j, 1])
+    return i[meet], j[meet]
 
 
 def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict], terrain_z: np.ndarray) -> list[dict]:
@@ -104,22 +148,14 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
             out.append(finding("PLACE005", "error", p.tag,
                                f"base at z={base:.4f} m, terrain at {tz:.4f} m ({abs(base - tz) * 1000:.1f} mm apart)"))
 
-    boxes = [footprint(pl.pose, manifests[pl.placement.asset_id]["bounds"]) for pl in placed
-             if pl.placement.asset_id in manifests]
     kept = [pl for pl in placed if pl.placement.asset_id in manifests]
-    if boxes:
-        lo = np.array([b[0].min(axis=0) for b in boxes])
-        hi = np.array([b[0].max(axis=0) for b in boxes])
-        order = np.argsort(lo[:, 0])
-        for ii, i in enumerate(order):  # sweep along east: only boxes whose x ranges meet
-            for j in order[ii + 1:]:
-                if lo[j, 0] > hi[i, 0]:
-                    break
-                if lo[j, 1] > hi[i, 1] or lo[i, 1] > hi[j, 1]:
-                    continue
-                d = penetration(boxes[i], boxes[j])
-                if d > OVERLAP_TOLERANCE_M:
-                    a, b = sorted((kept[i].placement.tag, kept[j].placement.tag))
-                    out.append(finding("PLACE004", "warning", f"{a}|{b}",
-                                       f"footprints of {a} and {b} overlap by {d:.2f} m"))
+    if kept:
+        bounds = np.array([manifests[pl.placement.asset_id]["bounds"] for pl in kept], dtype=np.float64)
+        boxes = footprints(np.array([pl.pose for pl in kept]), bounds[:, 0], bounds[:, 1])
+        i, j = box_pairs(boxes.corners.min(axis=1), boxes.corners.max(axis=1))
+        depth = penetrations(boxes.take(i), boxes.take(j))
+        for first, second, d in zip(i, j, depth):
+            if d > OVERLAP_TOLERANCE_M:
+                a, b = sorted((kept[first].placement.tag, kept[second].placement.tag))
+                out.append(finding("PLACE004", "warning", f"{a}|{b}", f"footprints of {a} and {b} overlap by {d:.2f} m"))
     return sorted(out, key=lambda f: (f["code"], f["site"]))

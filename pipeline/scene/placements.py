@@ -58,11 +58,13 @@ def inspection_points_enu(site: Site, georef) -> np.ndarray:
     return georef.to_enu(xy, h)
 
 
-def screen_error_px(error_m: float, distance_m: float, hfov_rad: float, width_px: int) -> float:
-    """Projected size, in pixels, of a geometric error seen at a distance."""
-    if distance_m <= 0:
-        return float("inf") if error_m > 0 else 0.0
-    return error_m / (2.0 * distance_m * np.tan(hfov_rad / 2.0)) * width_px
+def screen_error_px(error_m, distance_m, hfov_rad: float, width_px: int):
+    """Projected size, in pixels, of a geometric error seen at a distance (scalars or
+    arrays of one shape; an error seen from distance 0 or less is infinite unless 0)."""
+    error_m, distance_m = np.asarray(error_m, dtype=np.float64), np.asarray(distance_m, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = error_m / (2.0 * distance_m * np.tan(hfov_rad / 2.0)) * width_px
+    return np.where(distance_m > 0, px, np.where(error_m > 0, np.inf, 0.0))
 
 
 def choose_lods(placed: list[Placed], manifests: dict[str, dict], eyes: np.ndarray, site: Site) -> list[Placed]:
@@ -74,18 +76,19 @@ def choose_lods(placed: list[Placed], manifests: dict[str, dict], eyes: np.ndarr
     if len(eyes) == 0:
         return [Placed(pl.placement, pl.pose, pl.yaw, 0, float("inf")) for pl in placed]
     inverse = np.linalg.inv(np.array([pl.pose for pl in placed]))  # (n, 4, 4)
-    eyes_h = np.c_[eyes, np.ones(len(eyes))]
-    out = []
-    for pl, to_local in zip(placed, inverse):
-        m = manifests[pl.placement.asset_id]
-        lo, hi = np.array(m["bounds"][0]), np.array(m["bounds"][1])
-        local = (eyes_h @ to_local.T)[:, :3]
-        nearest = np.clip(local, lo, hi)
-        d = float(np.min(np.linalg.norm(local - nearest, axis=1)))
-        level = 0
+    local = (np.c_[eyes, np.ones(len(eyes))] @ inverse.transpose(0, 2, 1))[:, :, :3]  # (n, eyes, 3)
+    assets = [pl.placement.asset_id for pl in placed]
+    lo = np.array([manifests[a]["bounds"][0] for a in assets], dtype=np.float64)[:, None]
+    hi = np.array([manifests[a]["bounds"][1] for a in assets], dtype=np.float64)[:, None]
+    distance = np.linalg.norm(local - np.clip(local, lo, hi), axis=2).min(axis=1)
+    level = np.zeros(len(placed), dtype=int)
+    names = np.array(assets, dtype=object)
+    for asset_id in sorted(set(assets)):
+        m = manifests[asset_id]
+        of_asset = np.nonzero(names == asset_id)[0]
         for lod in m["lods"]:
-            px = screen_error_px(lod["error_m"], d, site.reference_hfov_rad, site.reference_width_px)
-            if px <= site.screen_tolerance_px and lod["level"] < len(m["lod_models"]) + 1:
-                level = lod["level"]
-        out.append(Placed(pl.placement, pl.pose, pl.yaw, level, d))
-    return out
+            if lod["level"] < len(m["lod_models"]) + 1:
+                px = screen_error_px(lod["error_m"], distance[of_asset], site.reference_hfov_rad,
+                                     site.reference_width_px)
+                level[of_asset] = np.where(px <= site.screen_tolerance_px, lod["level"], level[of_asset])
+    return [Placed(pl.placement, pl.pose, pl.yaw, int(k), float(d)) for pl, k, d in zip(placed, level, distance)]

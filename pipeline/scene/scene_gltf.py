@@ -288,11 +288,11 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
     visuals = []
     for (asset_id, lod), members in sorted(groups.items()):
         doc = sources[asset_id][0]
-        poses = [Z_TO_Y @ pl.pose @ Z_TO_Y.T for pl in members]
+        poses = Z_TO_Y @ np.array([pl.pose for pl in members]) @ Z_TO_Y.T  # (k, 4, 4), Y up
         for ni, local in visual_nodes(doc):
             chain = lod_meshes(doc, ni)[lod:] or lod_meshes(doc, ni)[-1:]
             morphs = any("targets" in p for p in doc["meshes"][chain[0]]["primitives"])
-            matrices = np.stack([p @ local for p in poses])
+            matrices = poses @ local
             visuals.append(_GroupVisual(asset_id, lod, ni, chain, members, matrices, morphs))
     instanced = [v.matrices for v in visuals if not v.morphs]
     transforms = instance_transforms(np.concatenate(instanced)) if instanced else None
