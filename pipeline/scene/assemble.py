@@ -96,20 +96,29 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
                         articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
 
-    def gltf_and_checks():
+    lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
+
+    def gltf_checks_and_record():
         scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
                          origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
         terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
-        return check_placements(site, fp, placed, manifests, terrain_z)
+        findings = check_placements(site, fp, placed, manifests, terrain_z)
+        record = _placements_record(site, fp, placed, origin, sun, tname, lod_hist, findings)
+        (out / "placements.json").write_text(_json_by_line(record))
+        return len(findings)
 
     # two halves of about equal cost (USD the largest part of one, glTF of the
     # other) side by side, when a core is spare
-    _, findings = beside(sdf_and_usd, gltf_and_checks)
-    lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
-    record = {
+    _, findings = beside(sdf_and_usd, gltf_checks_and_record)
+    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": findings}
+
+
+def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hist: dict, findings: list) -> dict:
+    """placements.json: every placement's ENU pose, LOD and distance, and the checks."""
+    return {
         "site": site.name, "crs": site.crs,
         "origin": {"latitude_deg": origin[0], "longitude_deg": origin[1], "height_m": origin[2]},
-        "sun": sun, "terrain": tname, "lod_histogram": lod_hist,
+        "sun": sun, "terrain": terrain, "lod_histogram": lod_hist,
         "placements": [{
             "tag": p.placement.tag, "asset": p.placement.asset_id, "level": p.placement.level,
             "state": p.placement.state, "plan": [p.placement.x, p.placement.y, p.placement.z],
@@ -120,8 +129,6 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
         "findings": findings,
         "ignored_entities": [list(x) for x in fp.ignored],
     }
-    (out / "placements.json").write_text(_json_by_line(record))
-    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": len(findings)}
 
 
 def _json_by_line(record: dict) -> str:
