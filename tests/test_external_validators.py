@@ -77,6 +77,67 @@ def test_sdf_include_resolves_only_through_sdf_path(package, tmp_path):
     assert any(f"model://{asset.id}" in m for m in missing.messages)
 
 
+def _world(path, model: str, names: list[str], extra: str = "", uris: dict | None = None):
+    includes = "".join(f"<include><uri>model://{(uris or {}).get(n, model)}</uri><name>{n}</name>"
+                       f"<pose>{k} 0 0 0 0 0</pose></include>" for k, n in enumerate(names))
+    path.write_text('<?xml version="1.0"?>\n<sdf version="1.9"><world name="w">'
+                    f'<light type="directional" name="sun"><direction>0 0 -1</direction></light>'
+                    f"{includes}{extra}</world></sdf>\n")
+    return path
+
+
+def test_world_in_parts_agrees_with_the_whole_check(package, tmp_path):
+    """Seven includes in parts of three: every part passes where the whole file does,
+    and an include of a model that does not exist fails the part that holds it, named."""
+    parent, asset = package
+    names = [f"m{k}" for k in range(1, 8)]
+    good = _world(tmp_path / "good.sdf", asset.id, names)
+    whole, parts = external.ign_sdf(good, [parent]), external.ign_sdf_world(good, [parent], part_includes=3)
+    _require_sdf(whole)
+    assert whole.status == parts.status == "passed", parts.messages
+    assert parts.validator.endswith("in 3 parts of up to 3 includes")
+
+    bad = _world(tmp_path / "bad.sdf", asset.id, names, uris={"m5": "no_such_model"})
+    whole, parts = external.ign_sdf(bad, [parent]), external.ign_sdf_world(bad, [parent], part_includes=3)
+    assert whole.status == parts.status == "failed"
+    assert parts.messages and all(m.startswith("part 2 (includes m4 .. m6): ") for m in parts.messages)
+    assert any("no_such_model" in m for m in parts.messages)
+
+
+def test_world_in_parts_finds_a_name_two_parts_share(package, tmp_path):
+    parent, asset = package
+    world = _world(tmp_path / "twice.sdf", asset.id, ["m1", "m2", "m3", "m4", "m1"])
+    whole = external.ign_sdf(world, [parent])
+    _require_sdf(whole)
+    parts = external.ign_sdf_world(world, [parent], part_includes=2)
+    assert whole.status == parts.status == "failed"
+    assert parts.messages == ("Error: the name 'm1' is used by 2 elements of the world",)
+
+
+def test_world_whose_elements_name_other_frames_is_checked_whole(package, tmp_path):
+    parent, asset = package
+    frame = '<frame name="gate"><pose relative_to="m1">1 0 0 0 0 0</pose></frame>'
+    world = _world(tmp_path / "frames.sdf", asset.id, ["m1", "m2", "m3"], extra=frame)
+    result = external.ign_sdf_world(world, [parent], part_includes=1)
+    _require_sdf(result)
+    assert result.status == "passed", result.messages
+    assert "parts" not in result.validator
+
+
+def test_world_parts_hold_every_element_once(tmp_path):
+    world = _world(tmp_path / "w.sdf", "x", [f"m{k}" for k in range(5)], extra='<frame name="f"/>')
+    tree = etree.parse(str(world))
+    seen = []
+    for k, first in enumerate(range(0, 5, 2)):
+        part = tmp_path / f"part{k}.sdf"
+        external._write_part(tree, first, first + 2, part)
+        w = etree.parse(str(part)).getroot().find("world")
+        seen += [i.findtext("name") for i in w.findall("include")]
+        assert [e.tag for e in w if e.tag != "include"] == ["light", "frame"]
+    assert seen == [f"m{k}" for k in range(5)]
+    assert len(tree.getroot().find("world").findall("include")) == 5  # the source tree untouched
+
+
 # --- COLLADA ---------------------------------------------------------------------------
 
 def test_collada_good_and_broken(package, tmp_path):

@@ -143,8 +143,9 @@ def _run_external(out: Path, sdf: list[Path], world: Path | None, usd: list[Path
     with ThreadPoolExecutor(max_workers=_WORKERS) as pool:
         # ign sdf (a subprocess each) and the COLLADA schema run beside USD, which
         # stays on this thread: pxr stages are not shared across threads here.
-        sdf_jobs = {pool.submit(clock.run, "ign sdf", external.ign_sdf, p, [models]): p
-                    for p in sdf + ([world] if world else [])}
+        sdf_jobs = {pool.submit(clock.run, "ign sdf", external.ign_sdf, p, [models]): p for p in sdf}
+        if world:
+            sdf_jobs[pool.submit(clock.run, "ign sdf", external.ign_sdf_world, world, [models])] = world
         dae_jobs = {pool.submit(clock.run, "collada schema", external.collada_schema, p): p for p in dae}
         for p in usd + ([scene_usd] if scene_usd else []):
             add(p, clock.run("usd validation", external.usd_validation, p))
