@@ -102,6 +102,7 @@ def test_world_in_parts_agrees_with_the_whole_check(package, tmp_path):
     assert whole.status == parts.status == "failed"
     assert parts.messages and all(m.startswith("part 2 (includes m4 .. m6): ") for m in parts.messages)
     assert any("no_such_model" in m for m in parts.messages)
+    assert not any(".part" in m for m in parts.messages)  # no temporary file named
 
 
 def test_world_in_parts_finds_a_name_two_parts_share(package, tmp_path):

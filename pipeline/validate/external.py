@@ -170,10 +170,11 @@ def ign_sdf_world(path: Path, sdf_path: list[Path], part_includes: int = WORLD_P
     if results[0].status == "skipped":
         return ExternalResult(results[0].validator, str(path), "skipped", results[0].messages, _SDF_HINT)
     messages = list(duplicates)
-    for k, (run, r) in enumerate(zip(runs, results), start=1):
+    for k, (run, part, r) in enumerate(zip(runs, parts, results), start=1):
         if r.status != "passed":
             span = f"part {k} (includes {_include_name(run[0])} .. {_include_name(run[-1])})"
-            messages += [f"{span}: {m}" for m in r.messages or ("failed",)]
+            # the part's temporary path would differ from run to run: the world's name instead
+            messages += [f"{span}: {m.replace(str(part), path.name)}" for m in r.messages or ("failed",)]
     return ExternalResult(name, str(path), "failed" if messages else "passed", tuple(messages), _SDF_HINT)
 
 
