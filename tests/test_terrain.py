@@ -128,15 +128,19 @@ def test_point_in_polygon_edges_count_inside():
 
 
 def test_penetration_of_oriented_boxes():
-    bounds = [[-1, -1, 0], [1, 1, 2]]
-    a = checks.footprint(np.eye(4), bounds)
+    lo, hi = np.array([[-1.0, -1, 0]]), np.array([[1.0, 1, 2]])
+    a = checks.footprints(np.eye(4), lo, hi)
+
+    def depth(pose) -> float:
+        return float(checks.penetrations(a, checks.footprints(pose, lo, hi))[0])
+
     shifted = np.eye(4)
     shifted[0, 3] = 1.5
-    assert checks.penetration(a, checks.footprint(shifted, bounds)) == pytest.approx(0.5)
+    assert depth(shifted) == pytest.approx(0.5)
     rot = np.eye(4)
     rot[:2, :2] = [[np.cos(0.7), -np.sin(0.7)], [np.sin(0.7), np.cos(0.7)]]
     rot[0, 3] = 3.5
-    assert checks.penetration(a, checks.footprint(rot, bounds)) < 0
+    assert depth(rot) < 0
     lifted = np.eye(4)
     lifted[2, 3] = 2.5
-    assert checks.penetration(a, checks.footprint(lifted, bounds)) < 0
+    assert depth(lifted) < 0

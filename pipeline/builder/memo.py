@@ -10,8 +10,8 @@ temporary name in the cache's root (which `Cache.clean_tmp` sweeps) and renamed 
 place: a killed build leaves whole entries or none.
 
 - ArrayMemo: plain arrays (numbers, booleans, fixed-width text) in a file of their
-  own layout (below), read without pickles. An entry that cannot be read is a miss, and the step's result,
-  computed again, replaces it.
+  own layout (below), read without pickles. An entry that cannot be read is a miss,
+  and the step's result, computed again, replaces it.
 - FileMemo: files a step wrote, kept as hard links to them (see there).
 """
 

@@ -24,7 +24,7 @@ from pipeline import ir
 from pipeline.digest import sha256_json
 from pipeline.errors import UserError
 from pipeline.export import names
-from pipeline.geometry.metrics import vertex_normals
+from pipeline.geometry.metrics import stored_normals
 
 # pycollada stamps <created>/<modified> with the current time; a fixed date keeps two
 # builds of the same inputs byte-identical.
@@ -130,9 +130,7 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
 def _sources(ident: str, mesh: ir.Mesh):
     """Positions, normals (computed when absent) and texcoords, all per vertex, so one
     index per corner serves every input (same offset)."""
-    normals = mesh.normals
-    if normals is None:  # +Z where no face gives a direction: validators reject non-unit normals
-        normals = vertex_normals(mesh.vertices, mesh.faces, unused=(0.0, 0.0, 1.0))
+    normals = stored_normals(mesh.vertices, mesh.faces, mesh.normals)
     streams = [("VERTEX", f"{ident}-positions", mesh.vertices, ("X", "Y", "Z")),
                ("NORMAL", f"{ident}-normals", normals, ("X", "Y", "Z"))]
     if mesh.uvs is not None:

@@ -33,7 +33,7 @@ import numpy as np
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
-from pipeline.geometry.metrics import vertex_normals
+from pipeline.geometry.metrics import stored_normals
 from pipeline.geometry.transform import decompose, quaternion_from_matrix
 
 # Z up -> Y up: (x, y, z) -> (x, z, -y). A proper rotation, so winding is unchanged.
@@ -252,9 +252,7 @@ def _add_mesh(doc: _Doc, name: str, m: ir.Mesh, material: int, mappings: list[di
     if len(m.faces) == 0 or len(m.vertices) == 0:
         return None
     positions = (np.asarray(m.vertices, dtype=np.float64) @ _C.T).astype(np.float32)
-    normals = m.normals
-    if normals is None:  # +Z where no face gives a direction: validators reject non-unit normals
-        normals = vertex_normals(m.vertices, m.faces, unused=(0.0, 0.0, 1.0))
+    normals = stored_normals(m.vertices, m.faces, m.normals)
     normals = np.asarray(normals, dtype=np.float64) @ _C.T
     normals = (normals / np.linalg.norm(normals, axis=1, keepdims=True)).astype(np.float32)
     attributes = {

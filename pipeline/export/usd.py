@@ -33,7 +33,7 @@ import numpy as np
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
-from pipeline.geometry.metrics import vertex_normals
+from pipeline.geometry.metrics import stored_normals
 from pipeline.geometry.transform import compose, quaternion_from_matrix
 
 _LOOKS = "Looks"
@@ -204,9 +204,7 @@ def _author_mesh_data(p, mesh, m: ir.Mesh) -> None:
     mesh.CreatePointsAttr(p.Vt.Vec3fArray.FromNumpy(pts))
     mesh.CreateFaceVertexCountsAttr(p.Vt.IntArray.FromNumpy(np.full(len(m.faces), 3, dtype=np.int32)))
     mesh.CreateFaceVertexIndicesAttr(p.Vt.IntArray.FromNumpy(np.ascontiguousarray(m.faces.reshape(-1), dtype=np.int32)))
-    normals = m.normals
-    if normals is None:  # +Z where no face gives a direction: validators reject non-unit normals
-        normals = vertex_normals(m.vertices, m.faces, unused=(0.0, 0.0, 1.0))
+    normals = stored_normals(m.vertices, m.faces, m.normals)
     mesh.CreateNormalsAttr(p.Vt.Vec3fArray.FromNumpy(np.asarray(normals, dtype=np.float32)))
     mesh.SetNormalsInterpolation(p.UsdGeom.Tokens.vertex)
     if m.uvs is not None:

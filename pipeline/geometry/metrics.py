@@ -55,6 +55,15 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, unused=(0.0, 0.0, 0.
     return out
 
 
+def stored_normals(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3) vertex normals as a file stores them: `normals` where the mesh has its
+    own, else vertex_normals with +Z where no face gives a direction (the formats'
+    validators reject normals that are not unit vectors)."""
+    if normals is not None:
+        return normals
+    return vertex_normals(vertices, faces, unused=(0.0, 0.0, 1.0))
+
+
 def sample_surface(vertices: np.ndarray, faces: np.ndarray, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """`count` points on the surface, area-weighted, deterministic for a seed.
 

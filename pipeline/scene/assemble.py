@@ -86,6 +86,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     tname = config.terrain_model_name(site)
     terrain_manifest = manifest.read(models / tname)
 
+    lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     out = Path(staging) / "scene"
     out.mkdir(parents=True, exist_ok=True)
 
@@ -95,8 +96,6 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
                         articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
-
-    lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
 
     def gltf_checks_and_record():
         scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
@@ -109,8 +108,8 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
 
     # two halves of about equal cost (USD the largest part of one, glTF of the
     # other) side by side, when a core is spare
-    _, findings = beside(sdf_and_usd, gltf_checks_and_record)
-    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": findings}
+    _, finding_count = beside(sdf_and_usd, gltf_checks_and_record)
+    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": finding_count}
 
 
 def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hist: dict, findings: list) -> dict:

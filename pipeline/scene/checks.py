@@ -71,11 +71,6 @@ def footprints(poses: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> Footprints:
     return Footprints(pts, axes, z)
 
 
-def footprint(pose: np.ndarray, bounds) -> Footprints:
-    """One placement's footprint (footprints with n = 1)."""
-    return footprints(pose, bounds[0], bounds[1])
-
-
 def penetrations(a: Footprints, b: Footprints) -> np.ndarray:
     """Smallest overlap depth of each pair of oriented boxes a[k], b[k] along the
     separating axes (2D edges of both footprints, and z); <= 0 where they do not
@@ -88,11 +83,6 @@ def penetrations(a: Footprints, b: Footprints) -> np.ndarray:
             overlap = np.minimum(pa.max(axis=1), pb.max(axis=1)) - np.maximum(pa.min(axis=1), pb.min(axis=1))
             depth = np.minimum(depth, overlap)
     return depth
-
-
-def penetration(a: Footprints, b: Footprints) -> float:
-    """penetrations of one pair."""
-    return float(penetrations(a, b)[0])
 
 
 def box_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
