@@ -32,6 +32,8 @@ _FIXED_DATE = datetime.datetime(2000, 1, 1, 0, 0, 0)
 _TOOL = "substation-twin"
 # Elements whose text is a list of floats that pycollada formats itself.
 _FLOAT_TAGS = ("color", "float", "matrix")
+# The symbol a mesh's <triangles> name and its node binds to the material.
+_MATERIAL_SYMBOL = "material0"
 
 
 def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
@@ -112,14 +114,15 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
     ident = names.safe_name(node_name)
     arrays, inputs, sources = _sources(ident, mesh)
     geom = dae_geometry.Geometry(doc, f"{ident}-mesh", ident, sources)
-    triset = geom.createTriangleSet(np.asarray(mesh.faces, dtype=np.int64).reshape(-1), inputs, "material0")
+    triset = geom.createTriangleSet(_corner_indices(mesh.faces, len(sources)), inputs,
+                                    None if material is None else _MATERIAL_SYMBOL)
     geom.primitives.append(triset)
     doc.geometries.append(geom)
 
     bindings = []
     if material is not None:
         mat = _phong_material(doc, material)
-        bindings.append(dae_scene.MaterialNode("material0", mat, inputs=[]))
+        bindings.append(dae_scene.MaterialNode(_MATERIAL_SYMBOL, mat, inputs=[]))
     node = dae_scene.Node(ident, children=[dae_scene.GeometryNode(geom, bindings)], name=ident)
     scene = dae_scene.Scene("Scene", [node])
     doc.scenes.append(scene)
@@ -127,9 +130,22 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
     return doc, arrays
 
 
+def _corner_indices(faces: np.ndarray, streams: int) -> np.ndarray:
+    """faces: (n, 3) vertex indices -> (n * 3 * streams,) <p> values: every stream is
+    per vertex, so each corner repeats its vertex index once per input offset."""
+    faces = np.asarray(faces, dtype=np.int64)
+    return np.repeat(faces.reshape(-1, 1), streams, axis=1).reshape(-1)
+
+
 def _sources(ident: str, mesh: ir.Mesh):
-    """Positions, normals (computed when absent) and texcoords, all per vertex, so one
-    index per corner serves every input (same offset)."""
+    """Positions, normals (computed when absent) and texcoords, all per vertex, each
+    input at an offset of its own.
+
+    One shared offset is valid COLLADA, but Gazebo's loader (gz-common ColladaLoader,
+    LoadTriangles) takes the <p> stride from the number of inputs, not from the largest
+    offset, and so reads such a file as garbage; NORMAL inside <vertices> is read with
+    the stride right, but then two corners at one position share the first one's
+    normal. Distinct offsets are read exactly by both it and pycollada."""
     normals = stored_normals(mesh.vertices, mesh.faces, mesh.normals)
     streams = [("VERTEX", f"{ident}-positions", mesh.vertices, ("X", "Y", "Z")),
                ("NORMAL", f"{ident}-normals", normals, ("X", "Y", "Z"))]
@@ -137,13 +153,13 @@ def _sources(ident: str, mesh: ir.Mesh):
         streams.append(("TEXCOORD", f"{ident}-texcoords", mesh.uvs, ("S", "T")))
     arrays, sources = {}, []
     inputs = dae_source.InputList()
-    for semantic, sid, data, comps in streams:
+    for offset, (semantic, sid, data, comps) in enumerate(streams):
         arr = np.array(data, dtype=np.float64).reshape(-1)
         # pycollada spells a source's floats when it is made and again on save; the
         # text is ours (_reformat_floats), so it is handed zeros, which spell fast
         sources.append(dae_source.FloatSource(sid, np.zeros_like(arr), comps))
         arrays[f"{sid}-array"] = arr
-        inputs.addInput(0, semantic, f"#{sid}", set="0" if semantic == "TEXCOORD" else None)
+        inputs.addInput(offset, semantic, f"#{sid}", set="0" if semantic == "TEXCOORD" else None)
     return arrays, inputs, sources
 
 

@@ -7,6 +7,8 @@ and CI filters key on them); `RULES` is the one table of what each code means.
 - geometry (GEOM0xx) and hierarchy (HIER0xx) run on an `ir.Asset` (`check_asset`);
 - placement (PLACE00x) findings are made by pipeline/scene/checks.py during the scene
   build and read back from build/scene/placements.json (listed here for the table);
+- gazebo (GZ0xx) compare what Gazebo's own loaders read (tools/gzprobe, run by
+  validate/gazebo.py) with what the files hold;
 - package (PKG0xx) run on a built package folder (`check_package`), parsing its XML
   with entities, DTDs and network access disabled: a package is untrusted input.
 """
@@ -66,6 +68,16 @@ RULES: dict[str, tuple[str, str, str]] = {
     "PKG004": ("error", "package", "manifest hash does not match the file"),
     "PKG005": ("error", "package", "XML declares a DOCTYPE (entities are refused, never resolved)"),
     "PKG006": ("error", "package", "manifest.json missing or unreadable"),
+    "GZ001": ("error", "gazebo", "Gazebo's mesh loader crashed or failed on the file"),
+    "GZ002": ("error", "gazebo", "Gazebo reads a different number of triangles than the file holds"),
+    "GZ003": ("error", "gazebo", "Gazebo's triangle corners (vertex positions) are not the file's"),
+    "GZ004": ("error", "gazebo", "Gazebo's mesh bounds differ from the file's"),
+    "GZ005": ("error", "gazebo", "Gazebo's normals or texture coordinates differ from the file's"),
+    "GZ006": ("error", "gazebo", "a model's visual bounds in Gazebo differ from its manifest's"),
+    "GZ007": ("error", "gazebo", "sdformat reports an error loading the world as Gazebo's server does"),
+    "GZ008": ("warning", "gazebo", "the world costs sdformat more than the parse budget (time or memory)"),
+    "GZ009": ("error", "gazebo", "a mesh the world references was not loaded by the probe (missing or unresolved)"),
+    "GZ010": ("error", "gazebo", "the COLLADA file's triangles cannot be read (a missing source or a malformed index list)"),
 }
 
 SEVERITIES = ("error", "warning", "info")
