@@ -129,6 +129,26 @@ class InspectionPoint:
 
 
 @dataclass(frozen=True)
+class FloorplanOptions:
+    """How the floor plan is read: [floorplan] and [plan] units, grid_scale of site.toml.
+
+    blocks: (block name or fnmatch pattern, asset id) pairs in the order written.
+    units: the drawing's length unit when site.toml names one (else $INSUNITS).
+    grid_scale: insertion z goes through the plan scale as x and y do.
+    """
+
+    blocks: tuple[tuple[str, str], ...] = ()
+    tag_attribute: str = "TAG"
+    level_attribute: str = "LEVEL"
+    state_attribute: str = "STATE"
+    default_level: str | None = None
+    insert_scale: str = "ignore"
+    units: str | None = None
+    grid_scale: float = 1.0
+    site_toml: str = "site.toml"
+
+
+@dataclass(frozen=True)
 class Site:
     """site.toml, validated, with defaults filled in. `path` is the file itself."""
 
@@ -150,6 +170,7 @@ class Site:
     floorplan: str = "floorplan/substation.dxf"
     date: str = "2025-03-20"
     description: str = ""
+    floorplan_options: FloorplanOptions = FloorplanOptions()
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -206,6 +227,9 @@ def load_site(path: Path, passed: PassedChecks | None = None) -> Site:
     for key, value in _numbers(data):
         if not math.isfinite(value):
             raise UserError(path, key, "not a finite number")
+    default_level = data.get("floorplan", {}).get("default_level")
+    if default_level is not None and default_level not in names:
+        raise UserError(path, "floorplan.default_level", f"level {default_level!r} is not defined in [[levels]]")
 
     levels = tuple(Level(lv["name"], float(lv["elevation"])) for lv in data["levels"])
     terrain = data.get("terrain", _defaults(schema("site")["properties"]["terrain"], {}))
@@ -233,7 +257,24 @@ def load_site(path: Path, passed: PassedChecks | None = None) -> Site:
             InspectionPoint(p["name"], tuple(float(v) for v in p["position"]), p["level"], p.get("target"))
             for p in data.get("inspection_points", [])
         ),
+        floorplan_options=_floorplan_options(data, path),
         raw=data,
+    )
+
+
+def _floorplan_options(data: dict, path: Path) -> FloorplanOptions:
+    fp = data.get("floorplan", _defaults(schema("site")["properties"]["floorplan"], {}))
+    attributes = fp.get("attributes") or _defaults(schema("site")["properties"]["floorplan"]["properties"]["attributes"], {})
+    return FloorplanOptions(
+        blocks=tuple((str(k), str(v)) for k, v in fp.get("blocks", {}).items()),
+        tag_attribute=attributes["tag"],
+        level_attribute=attributes["level"],
+        state_attribute=attributes["state"],
+        default_level=fp.get("default_level"),
+        insert_scale=fp["insert_scale"],
+        units=data["plan"].get("units"),
+        grid_scale=float(data["plan"]["grid_scale"]),
+        site_toml=str(path),
     )
 
 

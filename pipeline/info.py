@@ -24,6 +24,7 @@ class InfoReport:
     per_asset: dict[str, int] = field(default_factory=dict)
     unused: list[str] = field(default_factory=list)
     ignored: list[tuple[str, int]] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
 
 
@@ -53,13 +54,19 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
         except UserError as e:
             r.problems.append(str(e))
         r.assets[asset_id] = entry
-    from .ingest.floorplan import read_floorplan
+    from .ingest.floorplan import read_floorplan, require_placements_and_platforms
 
     try:
-        fp = read_floorplan(site.root / site.floorplan, known_assets=set(assets), levels=set(site.level_names))
+        fp = read_floorplan(site.root / site.floorplan, known_assets=set(assets), levels=set(site.level_names),
+                            options=site.floorplan_options)
     except UserError as e:
         r.problems.append(str(e))
         return r
+    r.warnings = [w for w in fp.warnings if not w.startswith(("no placements", "no platforms"))]
+    try:
+        require_placements_and_platforms(fp)
+    except UserError as e:
+        r.problems.append(str(e))
     r.per_level = dict(sorted(Counter(p.level for p in fp.placements).items()))
     r.per_asset = dict(sorted(Counter(p.asset_id for p in fp.placements).items()))
     from .builder.tasks import scenario_assets
@@ -87,5 +94,7 @@ def render(r: InfoReport, console: Console | None = None) -> None:
         console.print(f"assets no placement or scenario uses: {', '.join(r.unused)}")
     if r.ignored:
         console.print("ignored drawing entities: " + ", ".join(f"{k} x{n}" for k, n in r.ignored))
+    for w in r.warnings:
+        console.print(f"[yellow]warning:[/] {w}")
     for p in r.problems:
         console.print(f"[red]problem:[/] {p}")

@@ -343,10 +343,14 @@ class Asset:
 
 @dataclass(frozen=True)
 class Placement:
-    """One INSERT of the floor plan, in plant-grid metres.
+    """One placed INSERT of the floor plan (at the end of a chain of nested INSERTs).
 
-    position: (x, y) drawing metres in the plant grid; z: height above its level.
-    heading_deg: INSERT rotation, counter-clockwise in the plant grid.
+    position: (x, y) drawing metres in the plant grid, where the INSERT chain takes the
+    block's origin; z: height above its level, metres (through the plan's grid_scale,
+    as x and y go through it in georef).
+    heading_deg: direction of the block's x axis, counter-clockwise in the plant grid.
+    handle: the placed INSERT's; dxf_handles: the chain from the modelspace INSERT to it.
+    scale: the model's scale factor (1 unless [floorplan] insert_scale = "apply").
     """
 
     tag: str
@@ -358,6 +362,8 @@ class Placement:
     heading_deg: float = 0.0
     state: str | None = None
     handle: str = ""
+    dxf_handles: tuple[str, ...] = ()
+    scale: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -374,10 +380,17 @@ class Platform:
 
 @dataclass(frozen=True)
 class FloorPlan:
-    """What a floor plan holds: placements, platforms, and what was ignored."""
+    """What a floor plan holds: placements, platforms, and what was ignored.
+
+    inserts: (block name, count) of every INSERT met, nested ones included;
+    warnings: what the reader has to say about the drawing (blocks left out, no
+    platforms, no placements), one message each.
+    """
 
     path: str
     units: str
     placements: tuple[Placement, ...]
     platforms: tuple[Platform, ...]
     ignored: tuple[tuple[str, int], ...] = ()
+    inserts: tuple[tuple[str, int], ...] = ()
+    warnings: tuple[str, ...] = ()

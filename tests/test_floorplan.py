@@ -15,7 +15,7 @@ import ezdxf
 import numpy as np
 import pytest
 
-from pipeline.config import load_site
+from pipeline.config import FloorplanOptions, load_site
 from pipeline.errors import UserError
 from pipeline.ingest.floorplan import points_in_polygon, read_floorplan
 
@@ -120,23 +120,23 @@ def test_platform_with_arc_is_flattened(tmp_path):
     assert len(outline) > 10
 
 
-def test_units_unset_assumed_metres_and_inches_rejected(tmp_path):
-    fp = read_floorplan(make_dxf(tmp_path / "u.dxf", SMALL[:1], units=0))
-    assert fp.units.startswith("m (assumed") and fp.placements[0].x == 10.0
-    path = make_dxf(tmp_path / "in.dxf", SMALL[:1], units=1)
+def test_unitless_needs_plan_units_and_inches_are_read(tmp_path):
+    path = make_dxf(tmp_path / "u.dxf", SMALL[:1], units=0)
     with pytest.raises(UserError) as e:
         read_floorplan(path)
-    assert e.value.file == str(path) and e.value.obj == "$INSUNITS"
+    assert e.value.file == str(path) and e.value.obj == "$INSUNITS" and "[plan] units" in e.value.message
+    fp = read_floorplan(path, options=FloorplanOptions(units="m"))
+    assert fp.units == "m" and fp.placements[0].x == 10.0
+    fp = read_floorplan(make_dxf(tmp_path / "in.dxf", SMALL[:1], units=1))
+    assert fp.units == "in" and fp.placements[0].x == pytest.approx(0.254, rel=1e-15)
 
 
 BAD = {
     "duplicate_tag": ([insert("circuit_breaker", "52-1A"), insert("current_transformer", "52-1A", at=(5, 0, 0))], "52-1A", "duplicate TAG"),
     "unknown_level": ([insert("circuit_breaker", "52-1A", level="L9")], "52-1A", "LEVEL 'L9'"),
-    "unknown_block": ([insert("wave_trapp", "LT-1A")], "LT-1A", "not a known asset"),
-    "missing_tag": ([insert("circuit_breaker", None)], "INSERT #", "no TAG"),
     "missing_level": ([insert("circuit_breaker", "52-1A", level=None)], "52-1A", "no LEVEL"),
-    "negative_scale": ([insert("circuit_breaker", "52-1A", scale=(-1, 1, 1))], "52-1A", "mirrored or non-uniform"),
-    "non_uniform_scale": ([insert("circuit_breaker", "52-1A", scale=(1, 2, 1))], "52-1A", "mirrored or non-uniform"),
+    "negative_scale": ([insert("circuit_breaker", "52-1A", scale=(-1, 1, 1))], "52-1A", "mirrored"),
+    "non_uniform_scale": ([insert("circuit_breaker", "52-1A", scale=(1, 2, 1))], "52-1A", "non-uniform"),
 }
 
 
@@ -151,12 +151,19 @@ def test_bad_inserts_raise_one_user_error_naming_file_and_object(tmp_path, case)
     assert str(path) in str(e.value)
 
 
-def test_missing_tag_error_names_the_handle(tmp_path):
+def test_missing_tag_is_derived_from_the_handle(tmp_path):
     path = make_dxf(tmp_path / "a.dxf", [insert("circuit_breaker", None)])
     handle = next(e for e in ezdxf.readfile(path).modelspace() if e.dxftype() == "INSERT").dxf.handle
-    with pytest.raises(UserError) as e:
-        read_floorplan(path)
-    assert e.value.obj == f"INSERT #{handle}"
+    (p,) = read_floorplan(path).placements
+    assert p.tag == f"insert_{handle}" and p.dxf_handles == (handle,)
+
+
+def test_unknown_block_is_left_out_with_a_warning(tmp_path):
+    path = make_dxf(tmp_path / "a.dxf", [insert("wave_trapp", "LT-1A"), insert("circuit_breaker", "52-1A")])
+    fp = read_floorplan(path, known_assets=asset_ids(), levels=LEVELS)
+    assert [p.tag for p in fp.placements] == ["52-1A"]
+    (left_out,) = [w for w in fp.warnings if "left out" in w]
+    assert "wave_trapp x1" in left_out and "did 'wave_trapp' mean asset 'wave_trap'?" in left_out
 
 
 def test_bad_platforms(tmp_path):

@@ -36,4 +36,6 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
                       f"({report.cache['freed'] / 2**20:.0f} MB) to stay within {cache_limit / 2**20:.0f} MB")
     if p.unused and not only:
         console.print(f"not built (no placement or scenario uses them): {', '.join(p.unused)}")
+    for warning in p.floorplan.warnings:
+        console.print(f"floor plan: {warning}")
     return report

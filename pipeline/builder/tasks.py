@@ -115,7 +115,7 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
     """What the sources hold. `memo`: a file where the floor plan read last time is
     kept with its key, so that a no-op build does not parse the DXF again; `checked`:
     a file of the config checks that passed, so that it does not check them again."""
-    from ..ingest.floorplan import read_floorplan_memo
+    from ..ingest.floorplan import read_floorplan_memo, require_placements_and_platforms
 
     sources = Path(sources)
     before = _read_passed(checked)
@@ -127,7 +127,8 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
     if checked is not None and passed.met != before:
         _write_passed(checked, passed.met)
     plan_path = site.root / site.floorplan
-    fp = read_floorplan_memo(plan_path, set(assets), set(site.level_names), memo)
+    fp = read_floorplan_memo(plan_path, set(assets), set(site.level_names), memo, site.floorplan_options)
+    require_placements_and_platforms(fp)
     placed = {p.asset_id for p in fp.placements}
     used = sorted(placed | (scenario_assets(sources) & set(assets)))
     unused = sorted(set(assets) - set(used))

@@ -31,7 +31,8 @@ def _load(sources: Path, build: Path | None = None):
     site = config.load_site(Path(sources) / "site.toml")
     assets, _ = config.load_assets(Path(sources))
     memo = None if build is None else Path(build) / MEMO_NAME
-    fp = read_floorplan_memo(site.root / site.floorplan, set(assets), set(site.level_names), memo)
+    fp = read_floorplan_memo(site.root / site.floorplan, set(assets), set(site.level_names), memo,
+                             site.floorplan_options)
     origin = site.origin or default_origin(site, fp.platforms)
     return site, fp, Georeferencer(site, origin)
 
@@ -92,7 +93,8 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
 
     def sdf_and_usd():
         world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
-                        terrain_model=tname, sun=sun)
+                        terrain_model=tname, sun=sun, models=models,
+                        own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")))
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
                         articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
@@ -121,6 +123,8 @@ def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hi
         "placements": [{
             "tag": p.placement.tag, "asset": p.placement.asset_id, "level": p.placement.level,
             "state": p.placement.state, "plan": [p.placement.x, p.placement.y, p.placement.z],
+            "dxf_handles": list(p.placement.dxf_handles),
+            **({"scale": p.placement.scale} if p.placement.scale != 1.0 else {}),
             "heading_deg": p.placement.heading_deg, "enu": [float(v) for v in p.pose[:3, 3]],
             "yaw_rad": p.yaw, "lod": p.lod,
             "distance_m": None if not np.isfinite(p.distance_m) else round(p.distance_m, 6),
