@@ -54,14 +54,15 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
         except UserError as e:
             r.problems.append(str(e))
         r.assets[asset_id] = entry
-    from .ingest.floorplan import read_floorplan, require_placements_and_platforms
+    from .ingest.floorplan import require_placements_and_platforms, scan_floorplan
 
     try:
-        fp = read_floorplan(site.root / site.floorplan, known_assets=set(assets), levels=set(site.level_names),
-                            options=site.floorplan_options)
+        fp, plan_problems = scan_floorplan(site.root / site.floorplan, known_assets=set(assets),
+                                           levels=set(site.level_names), options=site.floorplan_options)
     except UserError as e:
         r.problems.append(str(e))
         return r
+    r.problems.extend(str(p) for p in plan_problems)
     r.warnings = [w for w in fp.warnings if not w.startswith(("no placements", "no platforms"))]
     try:
         require_placements_and_platforms(fp)
@@ -94,7 +95,9 @@ def render(r: InfoReport, console: Console | None = None) -> None:
         console.print(f"assets no placement or scenario uses: {', '.join(r.unused)}")
     if r.ignored:
         console.print("ignored drawing entities: " + ", ".join(f"{k} x{n}" for k, n in r.ignored))
+    from rich.markup import escape
+
     for w in r.warnings:
-        console.print(f"[yellow]warning:[/] {w}")
+        console.print(f"[yellow]warning:[/] {escape(w)}")
     for p in r.problems:
-        console.print(f"[red]problem:[/] {p}")
+        console.print(f"[red]problem:[/] {escape(p)}")

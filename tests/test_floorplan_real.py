@@ -490,3 +490,44 @@ def test_placements_json_records_the_handles():
     first, second = record["placements"]
     assert first["dxf_handles"] == ["1A", "2F"] and "scale" not in first
     assert second["dxf_handles"] == ["30"] and second["scale"] == 2.5
+
+
+def test_corpus_plan_builds_a_scene_with_its_handles(corpus, tmp_path):
+    """The corpus plan in a sources tree, as a user gets it to build: two mini assets
+    mapped to CAD blocks (half turns, OCS, 3 deep), the mirrored INSERTs the first
+    build lists deleted in CAD, a terrace drawn around everything."""
+    import ezdxf.bbox
+
+    import mini_sources
+    from pipeline.builder.run import build
+
+    root = mini_sources.make(tmp_path / "sources")
+    floorplan = '[floorplan]\ndefault_level = "L1"\nattributes = { tag = "A" }\n[floorplan.blocks]\n' \
+                '"M_A2ZXL" = "kiosk"\n"A$C67443EF0" = "pole"\n"EQ-*" = "pole"\n'
+    (root / "site.toml").write_text((root / "site.toml").read_text() + floorplan)
+    plan = root / "floorplan" / "plan.dxf"
+    shutil.copy(CORPUS_PLAN, plan)
+    site = load_site(root / "site.toml")
+    with pytest.raises(UserError) as e:
+        build(root, tmp_path / "build", quiet=True)
+    doc = ezdxf.readfile(plan)
+    msp = doc.modelspace()
+    listed = [line.split("#")[1].split(":")[0] for line in e.value.message.splitlines()[1:]]
+    assert len(listed) == 3 and "no platforms" not in e.value.message  # the INSERTs come first
+    for handle in listed:
+        msp.delete_entity(doc.entitydb[handle])
+    (x0, y0, _), (x1, y1, _) = ezdxf.bbox.extents(msp, fast=True).extmin, ezdxf.bbox.extents(msp, fast=True).extmax
+    msp.add_lwpolyline([(x0 - 1e3, y0 - 1e3), (x1 + 1e3, y0 - 1e3), (x1 + 1e3, y1 + 1e3), (x0 - 1e3, y1 + 1e3)],
+                       close=True, dxfattribs={"layer": "PLATFORM_L1"})
+    doc.saveas(plan)
+    report = build(root, tmp_path / "build", quiet=True)
+    assert not report.failed
+    record = json.loads((tmp_path / "build" / "scene" / "placements.json").read_text())
+    chains = [tuple(p["dxf_handles"]) for p in record["placements"]]
+    assert sorted(chains) == sorted(mapped_chains(doc, lambda b: b in ("M_A2ZXL", "A$C67443EF0") or b.startswith("EQ-")))
+    assert max(map(len, chains)) == 3 and site.floorplan_options.default_level == "L1"
+    for p in record["placements"]:
+        origin, heading, _ = ezdxf_pose(doc, p["dxf_handles"])
+        assert np.abs(np.array(p["plan"]) - origin * 0.001).max() < 1e-6
+        assert angle_diff(p["heading_deg"], heading) < 1e-6
+        assert p["tag"] == "insert_" + "_".join(p["dxf_handles"])

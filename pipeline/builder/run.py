@@ -37,5 +37,5 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
     if p.unused and not only:
         console.print(f"not built (no placement or scenario uses them): {', '.join(p.unused)}")
     for warning in p.floorplan.warnings:
-        console.print(f"floor plan: {warning}")
+        console.print(f"floor plan: {warning}", markup=False)  # the messages name [floorplan] keys
     return report

@@ -314,9 +314,9 @@ def _pose(matrix) -> tuple[np.ndarray, float, float]:
     det = float(np.linalg.det(linear))
     uniform = sv[0] > 0 and sv[0] - sv[-1] <= UNIFORM_SCALE_REL * sv[0]
     if not uniform or det <= 0:
-        what = [w for w, bad in (("mirrored", det < 0), ("non-uniform", not uniform)) if bad]
-        raise _Unplaceable(f"the INSERT chain is {' and '.join(what)} (axis scales {_fmt(sv)}, determinant "
-                           f"{det:.6g}): a model cannot be {'mirrored' if det < 0 else 'stretched'}")
+        what = [w for w, bad in (("mirrored (negative determinant)", det < 0),
+                                 (f"non-uniform (axis scales {_fmt(sv)})", not uniform)) if bad]
+        raise _Unplaceable(f"the INSERT chain is {' and '.join(what)}: a model can only be moved and turned")
     scale = float(np.cbrt(det))
     up = linear[2] / scale
     if math.hypot(up[0], up[1]) > TILT_TOLERANCE or up[2] <= 0:
@@ -328,7 +328,7 @@ def _pose(matrix) -> tuple[np.ndarray, float, float]:
 
 
 def _fmt(values) -> str:
-    return "(" + ", ".join(f"{v:.6g}" for v in values) + ")"
+    return "(" + ", ".join(f"{v:.10g}" for v in values) + ")"
 
 
 def _duplicates(r: _Reading) -> None:
