@@ -12,9 +12,11 @@ checks again on content they already passed.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import math
 import tomllib
+import zoneinfo
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -92,7 +94,8 @@ def validate(data: dict, schema_name: str, path: Path, passed: PassedChecks | No
         missing = e.message.split("'")[1] if "'" in e.message else e.message
         where = _key_path(e)
         key = missing if where == "(top level)" else f"{where}.{missing}"
-        raise UserError(path, key, "missing required key")
+        described = e.schema.get("properties", {}).get(missing, {}).get("description")
+        raise UserError(path, key, "missing required key" + (f" ({described})" if described else ""))
     if e.validator == "additionalProperties":
         raise UserError(path, _key_path(e), f"unknown key: {e.message}")
     raise UserError(path, _key_path(e), e.message)
@@ -167,6 +170,7 @@ class Site:
     reference_hfov_rad: float
     reference_width_px: int
     inspection_points: tuple[InspectionPoint, ...]
+    timezone: str  # IANA name: every local time of the site is in this zone
     floorplan: str = "floorplan/substation.dxf"
     date: str = "2025-03-20"
     description: str = ""
@@ -186,6 +190,10 @@ class Site:
     @property
     def level_names(self) -> tuple[str, ...]:
         return tuple(lv.name for lv in self.levels)
+
+    @property
+    def zone(self) -> zoneinfo.ZoneInfo:
+        return zoneinfo.ZoneInfo(self.timezone)
 
 
 def terrain_model_name(site: Site) -> str:
@@ -210,12 +218,40 @@ def check_crs(code: str, path: Path, key: str, passed: PassedChecks | None = Non
         passed.add(known)
 
 
+def time_zone(name: str, path: Path, key: str) -> zoneinfo.ZoneInfo:
+    """The IANA zone `name` from the system's tz database; a UserError naming the file
+    and key when there is no such zone (or no database at all)."""
+    try:
+        return zoneinfo.ZoneInfo(name)
+    except (zoneinfo.ZoneInfoNotFoundError, ValueError):
+        pass
+    if not zoneinfo.available_timezones():
+        raise UserError(path, key, f"no time zone database to look up {name!r} in: apt-get install tzdata "
+                                   "(or pip install tzdata)") from None
+    raise UserError(path, key, f"unknown time zone {name!r}: an IANA name is expected, e.g. "
+                               "\"America/Bahia\", \"Asia/Shanghai\", \"Europe/Berlin\" or \"UTC\"") from None
+
+
+def local_time(wall: dt.datetime, zone: dt.tzinfo) -> dt.datetime:
+    """The aware instant of the naive wall-clock time `wall` in `zone`. ValueError for
+    a wall time the zone skips (clocks put forward) or shows twice (clocks put back):
+    either needs its UTC offset written out."""
+    first, second = wall.replace(tzinfo=zone, fold=0), wall.replace(tzinfo=zone, fold=1)
+    if first.astimezone(dt.timezone.utc).astimezone(zone).replace(tzinfo=None) != wall:
+        raise ValueError(f"{wall.isoformat()} does not exist in {zone} (the clocks skip it)")
+    if first.utcoffset() != second.utcoffset():
+        raise ValueError(f"{wall.isoformat()} happens twice in {zone}: write its UTC offset, "
+                         f"{first.isoformat()} or {second.isoformat()}")
+    return first
+
+
 def load_site(path: Path, passed: PassedChecks | None = None) -> Site:
     path = Path(path)
     data = read_toml(path)
     validate(data, "site", path, passed)
     data = _defaults(schema("site"), data)
     check_crs(data["plan"]["crs"], path, "plan.crs", passed)
+    time_zone(data["site"]["timezone"], path, "site.timezone")
 
     names = [lv["name"] for lv in data["levels"]]
     for i, n in enumerate(names):
@@ -241,6 +277,7 @@ def load_site(path: Path, passed: PassedChecks | None = None) -> Site:
         description=data["site"].get("description", ""),
         floorplan=data["site"]["floorplan"],
         date=data["site"]["date"],
+        timezone=data["site"]["timezone"],
         crs=data["plan"]["crs"],
         grid_origin=tuple(float(v) for v in data["plan"]["grid_origin"]),
         grid_rotation_deg=float(data["plan"]["grid_rotation_deg"]),

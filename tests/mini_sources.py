@@ -18,6 +18,7 @@ SITE = """
 name = "mini"
 floorplan = "floorplan/plan.dxf"
 date = "2025-06-21"
+timezone = "America/Bahia"
 [plan]
 crs = "EPSG:31984"
 grid_origin = [{e0}, {n0}]

@@ -12,6 +12,7 @@ from pipeline.errors import UserError
 GOOD_SITE = """
 [site]
 name = "t"
+timezone = "America/Bahia"
 [plan]
 crs = "EPSG:31984"
 grid_origin = [560000.0, 8595000.0]

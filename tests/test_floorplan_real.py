@@ -29,6 +29,7 @@ CORPUS_PLAN = ROOT.parent / "shared" / "corpus" / "dxf" / "architectural_plan_mm
 SITE = """
 [site]
 name = "real"
+timezone = "UTC"
 floorplan = "floorplan/plan.dxf"
 [plan]
 crs = "EPSG:31984"

@@ -202,3 +202,16 @@ def test_more_placements_grow_the_glb_by_instances_only(tmp_path):
     s2 = (tmp_path / "b2" / "scene" / "mini.glb").stat().st_size
     assert s2 > s1
     assert (s2 - s1) / s1 < 0.05, (s1, s2)
+
+
+def test_the_worlds_sun_is_13_00_on_the_sites_clock(built):
+    """mini's site.toml: timezone America/Bahia (UTC-3), date 2025-06-21."""
+    _, out = built
+    record = json.loads((out / "scene" / "placements.json").read_text())
+    assert record["timezone"] == "America/Bahia"
+    sun = record["sun"]
+    assert (sun["time_local"], sun["time_utc"]) == ("2025-06-21T13:00:00-03:00", "2025-06-21T16:00:00+00:00")
+    world = etree.parse(str(out / "scene" / "mini.sdf"), SAFE_XML).getroot().find("world")
+    light = world.find("light[@name='sun']")
+    assert float(light.findtext("intensity")) == pytest.approx(sun["intensity"]) and sun["intensity"] > 0.5
+    assert 40.0 < sun["elevation_deg"] < 60.0  # a June (winter) afternoon at 12.7 S

@@ -108,7 +108,7 @@ def sun(d: dict):
     lim = np.nanmax(np.abs(err)) if np.isfinite(err).any() else 1.0
     im = ax.pcolormesh(hours, d["days"], err, shading="auto", cmap="RdBu_r", vmin=-lim, vmax=lim)
     fig.colorbar(im, ax=ax, label="study - ephemeris (deg)")
-    ax.set_xlabel(f"local time (UTC{d['utc_offset_h']:+d}) (h)")
+    ax.set_xlabel(f"local time ({d['timezone']}) (h)")
     ax.set_ylabel(f"day of {d['year']}")
     ax.set_title(f"elevation error at lat {d['lat']:.2f}, lon {d['lon']:.2f}", fontsize=8)
     bx.plot(d["days"], d["noon_error_deg"], color="C3")

@@ -140,9 +140,9 @@ def sun_section(ctx: Context, runtime: dict | None) -> dict:
     """The study's theta = 90 sin(pi tau) against astral's ephemeris over a year at the
     site: our own day x hour map (for the plot), plus the runtime bench's figures."""
     sun = importlib.import_module("pipeline.runtime.sun")
-    _, _, g = _site(ctx.sources)
+    site, _, g = _site(ctx.sources)
     lat, lon = g.origin_llh[0], g.origin_llh[1]
-    tz = dt.timezone(dt.timedelta(hours=round(lon / 15.0)))  # the site's mean solar zone
+    tz = site.zone
     year = 2025
     days = list(range(0, 365, ctx.pick(15, 3)))
     minutes = list(range(0, 24 * 60, ctx.pick(60, 20)))
@@ -156,7 +156,7 @@ def sun_section(ctx: Context, runtime: dict | None) -> dict:
                 err[i, j] = study - eph
     day = np.isfinite(err)
     absd = np.abs(err[day])
-    data = {"lat": lat, "lon": lon, "utc_offset_h": round(lon / 15.0), "year": year, "days": days, "minutes": minutes,
+    data = {"lat": lat, "lon": lon, "timezone": site.timezone, "year": year, "days": days, "minutes": minutes,
             "error_deg": np.where(day, err, None).tolist(),
             "abs_error_deg": {"max": float(absd.max()), "mean": float(absd.mean()),
                               "p95": float(np.percentile(absd, 95))},
@@ -182,9 +182,11 @@ def _noon_errors(sun, lat, lon, tz, year, days) -> list[float]:
 
 def runtime_section(ctx: Context) -> dict:
     bench = _bench_fn("pipeline.runtime.bench", "bench_runtime")
+    site, _, g = _site(ctx.sources)
+    where = (g.origin_llh[0], g.origin_llh[1], site.zone)
     if ctx.quick:
-        return bench(repeats=5, sizes=(100, 1_000))
-    return bench()
+        return bench(where, repeats=5, sizes=(100, 1_000))
+    return bench(where)
 
 
 # --- render --------------------------------------------------------------------------

@@ -9,9 +9,10 @@ bench_runtime() -> dict with, each as {median_s, min_s, max_s, repeats}:
   10,000 linear nodes (chains of 10 below constants; one constant changed);
 - usd_apply_state: one state (every bound visual of the sample: rotation, blend weight,
   variant token, plus the sun) written into an Sdf layer;
-- sun: elevation error over a year at lat -12.7, lon -38.3 (hourly every 5th day,
-  daytime): the study's 90 sin(pi tau) model vs astral, astral vs pvlib SPA when pvlib
-  is installed; with the cost of one evaluation of each model.
+- sun: elevation error over a year at the site (hourly every 5th day, daytime; the
+  study model's days are local dates in the site's time zone): the study's 90 sin(pi
+  tau) model vs astral, astral vs pvlib SPA when pvlib is installed; with the cost of
+  one evaluation of each model.
 """
 
 from __future__ import annotations
@@ -26,8 +27,8 @@ import numpy as np
 
 from . import graph, nodes, sun
 
-LAT, LON = -12.7, -38.3
-START = dt.datetime(2025, 3, 20, 9, 0, tzinfo=dt.timezone(dt.timedelta(hours=-3)))
+LAT, LON = -12.7, -38.3  # the sun node of the sample graph (its cost does not depend on where)
+START = dt.datetime(2025, 3, 20, 12, 0, tzinfo=dt.timezone.utc)
 
 
 def _timed(fn, repeats: int, setup=None) -> dict:
@@ -182,19 +183,19 @@ def _bench_usd(repeats: int) -> dict:
     return {"usd_apply_state": {**_timed(apply_state, repeats), "attributes": len(attrs)}}
 
 
-def _bench_sun(repeats: int) -> dict:
+def _bench_sun(repeats: int, lat: float, lon: float, zone: dt.tzinfo) -> dict:
     utc = dt.timezone.utc
     times = [dt.datetime(2025, 1, 1, tzinfo=utc) + dt.timedelta(days=d, hours=h) for d in range(0, 365, 5) for h in range(24)]
-    eph = np.array([sun.ephemeris(LAT, LON, t)[0] for t in times])
-    local = [t.astimezone(START.tzinfo) for t in times]
-    study = np.array([sun.study_elevation(LAT, LON, t) for t in local])
+    eph = np.array([sun.ephemeris(lat, lon, t)[0] for t in times])
+    local = [t.astimezone(zone) for t in times]
+    study = np.array([sun.study_elevation(lat, lon, t) for t in local])
     day = eph > 0
     diff = np.abs(study - eph)[day]
     out = {"samples": int(day.sum()),
            "study_vs_astral_deg": {"max": float(diff.max()), "mean": float(diff.mean()),
                                    "p95": float(np.percentile(diff, 95))},
-           "astral_eval": _timed(lambda: sun.ephemeris(LAT, LON, times[100]), repeats),
-           "study_eval": _timed(lambda: sun.study_elevation(LAT, LON, local[100]), repeats)}
+           "astral_eval": _timed(lambda: sun.ephemeris(lat, lon, times[100]), repeats),
+           "study_eval": _timed(lambda: sun.study_elevation(lat, lon, local[100]), repeats)}
     try:
         import pandas as pd
         import pvlib
@@ -202,15 +203,16 @@ def _bench_sun(repeats: int) -> dict:
         out["astral_vs_spa_deg"] = {"skipped": "pvlib not installed"}
         return out
     idx = pd.DatetimeIndex(times)
-    spa = pvlib.solarposition.spa_python(idx, LAT, LON)["elevation"].to_numpy()
+    spa = pvlib.solarposition.spa_python(idx, lat, lon)["elevation"].to_numpy()
     d = np.abs(eph - spa)[spa > 0]
     ds = np.abs(study - spa)[spa > 0]
     out["astral_vs_spa_deg"] = {"max": float(d.max()), "mean": float(d.mean()), "p95": float(np.percentile(d, 95))}
     out["study_vs_spa_deg"] = {"max": float(ds.max()), "mean": float(ds.mean())}
-    out["spa_eval"] = _timed(lambda: pvlib.solarposition.spa_python(idx[100:101], LAT, LON), max(3, repeats // 10))
+    out["spa_eval"] = _timed(lambda: pvlib.solarposition.spa_python(idx[100:101], lat, lon), max(3, repeats // 10))
     return out
 
 
-def bench_runtime(repeats: int = 30, sizes=(100, 1_000, 10_000)) -> dict:
+def bench_runtime(site: tuple[float, float, dt.tzinfo], repeats: int = 30, sizes=(100, 1_000, 10_000)) -> dict:
+    """site: latitude, longitude and time zone of the sun bench."""
     return {"sample": _bench_sample(repeats), "graphs": _bench_sizes(sizes, repeats),
-            "usd": _bench_usd(repeats), "sun": _bench_sun(repeats)}
+            "usd": _bench_usd(repeats), "sun": _bench_sun(repeats, *site)}

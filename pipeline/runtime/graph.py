@@ -48,12 +48,13 @@ class Scenario:
     seed: int
     duration_s: float
     step_s: float
-    start: dt.datetime
+    start: dt.datetime  # the UTC instant of t = 0
     assets: list[str]
     nodes: list[dict]
     edges: list[dict]
     description: str = ""
     raw: dict = field(default_factory=dict, repr=False)
+    zone: dt.tzinfo | None = None  # of local dates and times: the site's; None: start's own offset
 
     @property
     def steps(self) -> int:
@@ -61,7 +62,9 @@ class Scenario:
         return int(round(self.duration_s / self.step_s))
 
 
-def load_scenario(path: Path) -> Scenario:
+def load_scenario(path: Path, zone: dt.tzinfo | None = None) -> Scenario:
+    """`zone`: the site's time zone (site.toml [site] timezone, as the built scene
+    records it). A start without a UTC offset is a wall-clock time in it."""
     path = Path(path)
     data = config.read_toml(path)
     config.validate(data, "scenario", path)
@@ -71,10 +74,17 @@ def load_scenario(path: Path) -> Scenario:
     except ValueError as e:
         raise UserError(path, "scenario.start", f"not an ISO date-time: {e}") from None
     if start.tzinfo is None:
-        raise UserError(path, "scenario.start", "needs a UTC offset, e.g. 2025-03-20T06:00:00-03:00")
+        if zone is None:
+            raise UserError(path, "scenario.start", "no UTC offset, and no site time zone to read it in (build the "
+                                                    "scene first, or write the offset, e.g. 2025-03-20T06:00:00-03:00)")
+        try:
+            start = config.local_time(start, zone)
+        except ValueError as e:
+            raise UserError(path, "scenario.start", str(e)) from None
     return Scenario(path=path, name=s["name"], seed=int(s["seed"]), duration_s=float(s["duration_s"]),
-                    step_s=float(s["step_s"]), start=start, assets=list(s.get("assets", [])),
-                    nodes=data["nodes"], edges=data.get("edges", []), description=s.get("description", ""), raw=data)
+                    step_s=float(s["step_s"]), start=start.astimezone(dt.timezone.utc),
+                    assets=list(s.get("assets", [])), nodes=data["nodes"], edges=data.get("edges", []),
+                    description=s.get("description", ""), raw=data, zone=zone or start.tzinfo)
 
 
 def _split(ref: str) -> tuple[str, str]:
@@ -88,7 +98,7 @@ class Graph:
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
         f = scenario.path
-        self.ctx = Context(seed=scenario.seed, start=scenario.start, step_s=scenario.step_s)
+        self.ctx = Context(seed=scenario.seed, start=scenario.start, step_s=scenario.step_s, zone=scenario.zone)
         self.nodes: dict[str, Node] = {}
         self.period_steps: dict[str, int | None] = {}
         for i, spec in enumerate(scenario.nodes):

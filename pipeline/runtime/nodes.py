@@ -35,8 +35,14 @@ class Context:
     """What every node may know about the run besides its inputs."""
 
     seed: int
-    start: dt.datetime  # aware local date-time of t = 0
+    start: dt.datetime  # aware instant of t = 0
     step_s: float
+    zone: dt.tzinfo | None = None  # of local dates (the site's); None: start's own offset
+
+    def local(self, t: float) -> dt.datetime:
+        """The instant t s after the start, on the site's clock."""
+        when = self.start + dt.timedelta(seconds=float(t))
+        return when if self.zone is None else when.astimezone(self.zone)
 
 
 def stable_hash(text: str) -> int:
@@ -242,7 +248,8 @@ class Sun(Node):
     """Sun elevation/azimuth (rad) and direct horizontal irradiance (W/m2); see sun.py.
 
     model: "ephemeris" (astral NOAA, geometric unless refraction = true) or "study"
-    (90 sin(pi tau)). Time is the scenario start plus t.
+    (90 sin(pi tau), whose day is the local date in the site's time zone). Time is
+    the scenario start plus t.
     """
 
     type_name = "sun"
@@ -261,7 +268,7 @@ class Sun(Node):
         self.tau_atm, self.g0 = _float(self.p, "tau_atm"), _float(self.p, "G0")
 
     def step(self, t, inputs):
-        when = self.ctx.start + dt.timedelta(seconds=float(t))
+        when = self.ctx.local(t)
         elev, az = sun.ephemeris(self.lat, self.lon, when, bool(self.p["refraction"]))
         if self.p["model"] == "study":
             elev = sun.study_elevation(self.lat, self.lon, when)

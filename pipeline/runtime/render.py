@@ -42,6 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import config
 from . import camera as camera_model
 from . import sun as sun_model
 
@@ -268,6 +269,7 @@ class Site:
     date: str
     inspection: dict[str, dict] = field(default_factory=dict)  # name -> {enu, target}
     terrain: str | None = None  # the terrain package (placed at the ENU origin)
+    zone: dt.tzinfo | None = None  # site.toml [site] timezone, as site.toml or the build records it
 
     def placement(self, tag: str) -> dict:
         for p in self.placements:
@@ -312,6 +314,8 @@ def load_site(build: Path, sources: Path | None = None) -> Site:
     o = data["origin"]
     origin = (o["latitude_deg"], o["longitude_deg"], o["height_m"])
     site = Site(build, data["placements"], manifests, origin, "2025-03-20")
+    if data.get("timezone"):
+        site.zone = config.time_zone(data["timezone"], index, "timezone")
     terrain = data.get("terrain")
     if terrain and (build / "models" / terrain / f"{terrain}.glb").is_file():
         site.terrain = terrain
@@ -323,12 +327,11 @@ def load_site(build: Path, sources: Path | None = None) -> Site:
 
 def _add_site_toml(site: Site, path: Path) -> None:
     """Inspection points in ENU through the same georeferencer the build used."""
-    from .. import config
     from ..georef import Georeferencer
     from ..scene.placements import inspection_points_enu
 
     cfg = config.load_site(path)
-    site.date = cfg.date
+    site.date, site.zone = cfg.date, cfg.zone
     enu = inspection_points_enu(cfg, Georeferencer(cfg, site.origin))
     for p, e in zip(cfg.inspection_points, enu):
         site.inspection[p.name] = {"enu": np.asarray(e, float), "target": p.target}
@@ -700,6 +703,7 @@ def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, poin
     gauges = {"gauge_tank": gauge_box(target_pose, pose, k)}
     return {
         "time": shot.when.isoformat(),
+        "time_utc": shot.when.astimezone(dt.timezone.utc).isoformat(),
         "sun": {"azimuth_deg": math.degrees(shot.sun_azimuth), "elevation_deg": math.degrees(shot.sun_elevation),
                 "irradiance_w_m2": shot.irradiance, "direct_normal_w_m2": shot.dni},
         "camera": {"zoom": shot.lens.zoom, "near": shot.lens.near, "far": shot.lens.far, **k,
@@ -836,7 +840,7 @@ def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[obj
     from ..errors import UserError
     from . import graph, run
 
-    scenario = graph.load_scenario(scenario_path)
+    scenario = graph.load_scenario(scenario_path, site.zone)
     observed = run.load_observed(site.build)
     data, records = run.simulate(scenario, observed)
     fed = sorted({vs.tag for frame in data.frames for vs in frame})
@@ -861,7 +865,8 @@ def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[obj
             vals = {o.binding["variable"]: o.value for vs in frame if vs.tag == ob.tag for o in vs.outputs}
             if vals:
                 states[ob.tag] = vals
-        shots.append(Shot(scenario.start + dt.timedelta(seconds=t), pose, camera_model.lens(zoom), el, az, irr,
+        when = (scenario.start + dt.timedelta(seconds=t)).astimezone(scenario.zone)
+        shots.append(Shot(when, pose, camera_model.lens(zoom), el, az, irr,
                           states, frame, target))
     return scenario, shots
 
@@ -892,8 +897,7 @@ STUDY_TARGET = "RE-B3"  # bank B faces ENE: its reader looks WSW, into the late 
 STUDY_ZOOM = 45.0
 STUDY_DISTANCE_M = 25.0  # at 45x the 0.34 m dial spans about half of the frame's width
 STUDY_MAX_OBLIQUITY = math.radians(45.0)  # beyond, the glass's Fresnel reflection hides the dial
-STUDY_TZ = dt.timezone(dt.timedelta(hours=-3))
-# Local times on the site's date (sunrise ~05:40, sunset ~17:45): early night at the end of
+# Local times (site.toml [site] timezone) on the site's date (sunrise ~05:40, sunset ~17:45): early night at the end of
 # civil twilight, late afternoon 40 min before sunset. The sequence runs in a day's
 # order from the first light in which the pointer is visible (the study's H_ref is its
 # first image): morning, noon, late afternoon, then the three night conditions.
@@ -906,15 +910,20 @@ def study_times(site: Site) -> list[tuple[str, dt.datetime]]:
     import astral
     import astral.sun
 
+    from ..errors import UserError
+
+    if site.zone is None:
+        raise UserError(site.build / "scene" / "placements.json", "timezone",
+                        "the study's local times need the site's time zone: site.toml [site] timezone, then rebuild")
     date = dt.date.fromisoformat(site.date)
-    noon = astral.sun.noon(astral.Observer(site.origin[0], site.origin[1]), date, tzinfo=STUDY_TZ)
+    noon = astral.sun.noon(astral.Observer(site.origin[0], site.origin[1]), date, tzinfo=site.zone)
     out = []
     for name, hhmm in CONDITIONS:
         if hhmm is None:
             out.append((name, noon.replace(microsecond=0)))
         else:
             h, m = map(int, hhmm.split(":"))
-            out.append((name, dt.datetime.combine(date, dt.time(h, m), STUDY_TZ)))
+            out.append((name, config.local_time(dt.datetime.combine(date, dt.time(h, m)), site.zone)))
     return out
 
 

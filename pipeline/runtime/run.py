@@ -3,17 +3,19 @@ the placements' manifests, write states.jsonl and apply the result to every form
 build produced (USD layer, animated glTF copies, SDF variants and sun fragments).
 
 The runtime reads the build only through files meant for it: build/scene/placements.json
-(TAG, asset, STATE of every placement), build/models/<asset>/manifest.json, and the
+(TAG, asset, STATE of every placement, the site's time zone), build/models/<asset>/manifest.json, and the
 packages' model files named there; never the build internals.
 """
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import config
 from ..errors import UserError
 from ..export import manifest as manifest_io
 from . import graph, nodes
@@ -32,16 +34,29 @@ class RunData:
     sun_intensity_scale: float = 1.0
 
 
-def load_observed(build_dir: Path) -> list[nodes.Observed]:
-    """Stateful placements (STATE set) of the built scene, with their manifests."""
-    build_dir = Path(build_dir)
-    index = build_dir / "scene" / "placements.json"
+def _scene_index(build_dir: Path) -> dict:
+    index = Path(build_dir) / "scene" / "placements.json"
     if not index.is_file():
         raise UserError(index, None, "no built scene: run `twin build` first")
     try:
-        placements = json.loads(index.read_text())["placements"]
-    except (ValueError, KeyError) as e:
+        data = json.loads(index.read_text())
+        data["placements"]
+    except (ValueError, KeyError, TypeError) as e:
         raise UserError(index, None, f"unreadable placement index: {e}") from None
+    return data
+
+
+def scene_zone(build_dir: Path) -> dt.tzinfo | None:
+    """The built site's time zone (site.toml [site] timezone); None for a scene built
+    before placements.json recorded it."""
+    name = _scene_index(build_dir).get("timezone")
+    return None if name is None else config.time_zone(name, Path(build_dir) / "scene" / "placements.json", "timezone")
+
+
+def load_observed(build_dir: Path) -> list[nodes.Observed]:
+    """Stateful placements (STATE set) of the built scene, with their manifests."""
+    build_dir = Path(build_dir)
+    placements = _scene_index(build_dir)["placements"]
     out = []
     for p in placements:
         if not p.get("state"):
@@ -105,8 +120,8 @@ def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = No
     """Run a scenario against a built scene; outputs in out_dir (default
     build/runs/<scenario name>/). Returns a summary dict."""
     t0 = time.perf_counter()
-    scenario = graph.load_scenario(scenario_path)
     build_dir = Path(build_dir)
+    scenario = graph.load_scenario(scenario_path, scene_zone(build_dir))
     observed = load_observed(build_dir)
     missing = sorted(set(scenario.assets) - {o.asset for o in observed} - {
         p.name for p in (build_dir / "models").glob("*") if (p / manifest_io.MANIFEST).is_file()})

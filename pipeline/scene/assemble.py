@@ -21,7 +21,7 @@ from . import scene_gltf, stage_usd, world_sdf
 from .checks import check_placements
 from .terrain import terrain_asset
 
-SUN_HOUR_UTC = 13  # the built scene's sun: early afternoon on the site's date (Brazil, UTC-3)
+SUN_LOCAL_TIME = dt.time(13, 0)  # the built scene's sun: early afternoon on the site's date, site time
 
 
 def _load(sources: Path, build: Path | None = None):
@@ -39,11 +39,13 @@ def _load(sources: Path, build: Path | None = None):
 
 def scene_sun(site: config.Site, origin_llh) -> dict:
     """Sun of the built scene (the runtime moves it): astral's ephemeris at a fixed
-    time on the site's date; intensity scaled by the study's clear-sky irradiance."""
+    local time on the site's date, in its [site] timezone; intensity scaled by the
+    study's clear-sky irradiance."""
     from astral import Observer
     from astral.sun import azimuth, elevation
 
-    when = dt.datetime.fromisoformat(site.date).replace(hour=SUN_HOUR_UTC, tzinfo=dt.timezone.utc)
+    local = config.local_time(dt.datetime.combine(dt.date.fromisoformat(site.date), SUN_LOCAL_TIME), site.zone)
+    when = local.astimezone(dt.timezone.utc)
     obs = Observer(latitude=origin_llh[0], longitude=origin_llh[1])
     el = float(elevation(obs, when))
     az = float(azimuth(obs, when))
@@ -51,7 +53,7 @@ def scene_sun(site: config.Site, origin_llh) -> dict:
     irradiance = 1361.0 * np.exp(-0.2 / s) * s if s > 0 else 0.0
     return {"elevation_deg": round(el, 9), "azimuth_deg": round(az, 9), "irradiance_w_m2": round(irradiance, 6),
             "intensity": round(irradiance / 1000.0, 6), "illuminance_lux": round(irradiance * 100.0, 3),
-            "time_utc": when.isoformat()}
+            "time_local": local.isoformat(), "time_utc": when.isoformat()}
 
 
 def build_terrain(staging: Path, sources: str, build: str | None = None) -> dict:
@@ -117,7 +119,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
 def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hist: dict, findings: list) -> dict:
     """placements.json: every placement's ENU pose, LOD and distance, and the checks."""
     return {
-        "site": site.name, "crs": site.crs,
+        "site": site.name, "crs": site.crs, "timezone": site.timezone,
         "origin": {"latitude_deg": origin[0], "longitude_deg": origin[1], "height_m": origin[2]},
         "sun": sun, "terrain": terrain, "lod_histogram": lod_hist,
         "placements": [{
