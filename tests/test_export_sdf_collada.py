@@ -16,6 +16,7 @@ from pipeline.errors import UserError
 from pipeline.export import collada as collada_writer
 from pipeline.export import names
 from pipeline.export import sdf as sdf_writer
+from pipeline.geometry.primitives import fit_primitive
 from pipeline.validate import external
 
 ASSET_ID = "test_arm"
@@ -165,7 +166,12 @@ def _assert_kinematics_match(sdf_path, asset):
         for v in link.visuals:
             np.testing.assert_allclose(_pose(link_el.find(f"visual[@name='{v.name}']")), v.pose, atol=1e-9, rtol=0)
         for c in link.collisions:
-            np.testing.assert_allclose(_pose(link_el.find(f"collision[@name='{c.name}']")), c.pose, atol=1e-9, rtol=0)
+            # a collision mesh that is a box or a cylinder is written as that shape, posed at its centre
+            shape = fit_primitive(c.mesh.vertices, c.mesh.faces)
+            el = link_el.find(f"collision[@name='{c.name}']")
+            assert (el.find("geometry/mesh") is None) == (shape is not None)
+            expected = c.pose if shape is None else c.pose @ shape.pose
+            np.testing.assert_allclose(_pose(el), expected, atol=1e-9, rtol=0)
     for joint in asset.joints:
         el = model.find(f"joint[@name='{joint.name}']")
         assert (el.get("type"), el.findtext("parent"), el.findtext("child")) == (joint.type, joint.parent, joint.child)

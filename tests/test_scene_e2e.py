@@ -77,9 +77,10 @@ def angle_diff(a: float, b: float) -> float:
 def sdf_poses(world: Path) -> dict[str, tuple[np.ndarray, float]]:
     root = etree.parse(str(world), SAFE_XML).getroot()
     out = {}
-    for inc in root.iter("include"):
-        name = inc.findtext("name")
-        v = [float(t) for t in inc.findtext("pose").split()]
+    # a placement is an <include> or, grouped with others of its variant, a <frame>
+    for el in [*root.iter("include"), *root.findall("world/model/frame")]:
+        name = el.findtext("name") if el.tag == "include" else el.get("name")
+        v = [float(t) for t in el.findtext("pose").split()]
         out[name] = (np.array(v[:3]), math.degrees(v[5]))
     return out
 

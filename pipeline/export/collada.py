@@ -24,6 +24,7 @@ from pipeline import ir
 from pipeline.digest import sha256_json
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.export.variants import variant_collisions, variant_visuals
 from pipeline.geometry.metrics import stored_normals
 
 # pycollada stamps <created>/<modified> with the current time; a fixed date keeps two
@@ -37,7 +38,8 @@ _MATERIAL_SYMBOL = "material0"
 
 
 def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
-    """Write every visual LOD and every collision mesh of `asset` under folder/meshes/.
+    """Write every visual LOD, the merged visuals of each coarse LOD variant
+    (export/variants.py) and every collision mesh of `asset` under folder/meshes/.
 
     A visual writes as many LODs as it has (names.mesh_file(link, visual, k) for
     k < len(visual.lods)); readers fall back to its coarsest one, as Visual.lod does.
@@ -58,11 +60,22 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
             rel = names.mesh_file(link.name, visual.name, level)
             _write_document(folder / rel, visual.name, mesh, material, made, memo)
             written.append(rel)
+    for level in range(1, asset.lod_count):
+        for link in asset.links:
+            for visual in variant_visuals(asset, link, level):
+                if visual.merged:
+                    _write_document(folder / visual.mesh_file, visual.name, visual.mesh(level),
+                                    _material(asset, visual.parts[0]), {}, memo)
+                    written.append(visual.mesh_file)
     for link in asset.links:
         for col in link.collisions:
             rel = names.collision_file(link.name, col.name)
             _write_document(folder / rel, col.name, col.mesh, None, {}, memo)
             written.append(rel)
+        merged = [c for c in variant_collisions(link, 1) if len(c.parts) > 1] if asset.lod_count > 1 else []
+        for col in merged:
+            _write_document(folder / col.mesh_file, col.name, col.mesh(), None, {}, memo)
+            written.append(col.mesh_file)
     return sorted(written)
 
 

@@ -21,6 +21,25 @@ def mesh_file(link: str, visual: str, lod: int) -> str:
     return f"meshes/{safe_name(link)}__{safe_name(visual)}__lod{lod}.dae"
 
 
+def merged_visual_name(material: str) -> str:
+    """A LOD variant's visual that draws every visual of a link with this material."""
+    return f"{safe_name(material)}__merged"
+
+
+def merged_mesh_file(link: str, material: str, lod: int) -> str:
+    """Package-relative COLLADA file of a link's visuals of one material, merged, at one LOD."""
+    return f"meshes/{safe_name(link)}__{safe_name(material)}__merged_lod{lod}.dae"
+
+
+def merged_collision_name() -> str:
+    """A LOD variant's collision that stands for a link's collision meshes."""
+    return "collision__merged"
+
+
+def merged_collision_file(link: str) -> str:
+    return f"meshes/{safe_name(link)}__collision__merged.dae"
+
+
 def collision_file(link: str, collision: str) -> str:
     return f"meshes/{safe_name(link)}__{safe_name(collision)}__collision.dae"
 

@@ -4,7 +4,9 @@ Frames follow SDF 1.9 defaults, so no pose needs a `relative_to` attribute:
 a link pose is in the model frame (__model__), a visual/collision/inertial pose in its
 link's frame, a joint pose in its child link's frame, a joint axis in the joint frame.
 Meshes are the package's COLLADA files, referenced as model://<asset id>/meshes/...,
-which lets a LOD variant folder reuse them without copies.
+which lets a LOD variant folder reuse them without copies; a variant's links draw each
+material once, and a collision mesh that is a box or a cylinder is written as that
+shape (export/variants.py): physics engines test those in closed form.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from lxml import etree
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.export.variants import VariantVisual, variant_collisions, variant_visuals
+from pipeline.geometry.primitives import Primitive
 from pipeline.geometry.transform import matrix_to_xyz_rpy
 
 SDF_VERSION = "1.9"
@@ -103,13 +107,16 @@ def _link(model, asset: ir.Asset, link: ir.Link, lod: int, overrides: dict) -> N
     el = _sub(model, "link", name=names.safe_name(link.name))
     _sub(el, "pose", _pose_text(link.pose))  # default frame: __model__
     _inertial(el, link)
-    for visual in link.visuals:
+    for visual in variant_visuals(asset, link, lod, keep=frozenset(overrides)):
         pose, material = overrides.get(visual.name, (None, None))
-        _visual(el, asset, link, visual, lod, pose, material)
-    for col in link.collisions:
+        _visual(el, asset, visual, pose, material)
+    for col in variant_collisions(link, lod):
         c = _sub(el, "collision", name=names.safe_name(col.name))
         _sub(c, "pose", _pose_text(col.pose))
-        _mesh_geometry(c, asset.id, names.collision_file(link.name, col.name))
+        if col.shape is None:
+            _mesh_geometry(c, asset.id, col.mesh_file)
+        else:
+            _primitive_geometry(c, col.shape)
 
 
 def _inertial(link_el, link: ir.Link) -> None:
@@ -143,13 +150,11 @@ def _link_bounds(link: ir.Link) -> tuple[np.ndarray, np.ndarray]:
     return allp.min(axis=0), allp.max(axis=0)
 
 
-def _visual(link_el, asset: ir.Asset, link: ir.Link, visual: ir.Visual, lod: int,
-            pose: np.ndarray | None, material: str | None) -> None:
+def _visual(link_el, asset: ir.Asset, visual: VariantVisual, pose: np.ndarray | None, material: str | None) -> None:
     el = _sub(link_el, "visual", name=names.safe_name(visual.name))
     _sub(el, "pose", _pose_text(visual.pose if pose is None else np.asarray(pose, dtype=np.float64)))
-    level = min(lod, len(visual.lods) - 1)
-    _mesh_geometry(el, asset.id, names.mesh_file(link.name, visual.name, level))
-    _material(el, asset, visual, material or visual.material)
+    _mesh_geometry(el, asset.id, visual.mesh_file)
+    _material(el, asset, visual.name, material or visual.material)
 
 
 def _mesh_geometry(parent, asset_id: str, rel_path: str) -> None:
@@ -157,11 +162,21 @@ def _mesh_geometry(parent, asset_id: str, rel_path: str) -> None:
     _sub(mesh, "uri", f"model://{asset_id}/{rel_path}")
 
 
-def _material(visual_el, asset: ir.Asset, visual: ir.Visual, material_name: str) -> None:
+def _primitive_geometry(parent, shape: Primitive) -> None:
+    geometry = _sub(parent, "geometry")
+    if shape.kind == "box":
+        _sub(_sub(geometry, "box"), "size", _floats(shape.size))
+    else:
+        cylinder = _sub(geometry, "cylinder")
+        _sub(cylinder, "radius", names.fmt(shape.size[0]))
+        _sub(cylinder, "length", names.fmt(shape.size[1]))
+
+
+def _material(visual_el, asset: ir.Asset, visual_name: str, material_name: str) -> None:
     try:
         mat = asset.material(material_name)
     except KeyError:
-        raise UserError(asset.source or asset.id, visual.name,
+        raise UserError(asset.source or asset.id, visual_name,
                         f"material {material_name!r} is not among the asset's materials") from None
     p = mat.phong()
     el = _sub(visual_el, "material")

@@ -78,6 +78,7 @@ RULES: dict[str, tuple[str, str, str]] = {
     "GZ008": ("warning", "gazebo", "the world costs sdformat more than the parse budget (time or memory)"),
     "GZ009": ("error", "gazebo", "a mesh the world references was not loaded by the probe (missing or unresolved)"),
     "GZ010": ("error", "gazebo", "the COLLADA file's triangles cannot be read (a missing source or a malformed index list)"),
+    "GZ011": ("error", "gazebo", "dartsim cannot build the world as gz-sim's Physics system does"),
 }
 
 SEVERITIES = ("error", "warning", "info")

@@ -93,7 +93,7 @@ def probe_world(world: Path, sdf_path: list[Path], *, jobs: int = 2, meshes: boo
                 physics_s: float = 0.0) -> dict:
     """The probe's report of a world: {"world": figures, "models": [...], "meshes": {...},
     "physics": {...} when physics_s > 0}."""
-    env = dict(os.environ, SDF_PATH=os.pathsep.join(str(p) for p in sdf_path))
+    env = dict(os.environ, SDF_PATH=os.pathsep.join(str(Path(p).resolve()) for p in sdf_path))
     args = ["world", str(world), "--jobs", str(jobs)]
     if not meshes:
         args.append("--no-meshes")
@@ -251,3 +251,97 @@ def mesh_findings(paths: list[Path], reports: dict[str, dict], site_of) -> list[
             continue
         out.extend(compare_mesh(site_of(path), written, report))
     return out
+
+
+# --- a build --------------------------------------------------------------------------
+
+@dataclass
+class BuildCheck:
+    """What the probe found in a build: findings by asset id (package meshes and model
+    bounds) and for the scene (the world), the world's entity counts (the same in every
+    run) and its measured figures (parse time and memory, physics: these vary)."""
+
+    assets: dict[str, list[Finding]]
+    scene: list[Finding]
+    world: dict
+    figures: dict
+    missing: dict | None = None  # the report's "skipped" row when the probe is not built
+
+
+def _packages_world(folder: Path, models: list[str]) -> Path:
+    """A world that includes each model once, at the origin: sdformat reads each
+    model.sdf as a world of placements would."""
+    includes = "".join(f"<include><uri>model://{m}</uri><name>{m}</name></include>" for m in models)
+    path = folder / "packages.sdf"
+    path.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="packages">{includes}</world></sdf>\n')
+    return path
+
+
+def _model_findings(report: dict, manifests: dict[str, tuple[str, int, dict]]) -> dict[str, list[Finding]]:
+    """Each package model's visual bounds as Gazebo placed its meshes, against its
+    manifest: equal for a package (LOD 0), inside them by the level's measured error
+    for a LOD variant (its merged meshes have tighter boxes than its parts')."""
+    out: dict[str, list[Finding]] = {}
+    for model in report.get("models", []):
+        asset, level, manifest = manifests[model["name"]]
+        if "visual_bounds" not in model or not manifest.get("bounds"):
+            continue
+        probed = np.asarray(model["visual_bounds"], dtype=np.float64)
+        expected = np.asarray(manifest["bounds"], dtype=np.float64)
+        if level == 0:
+            found = compare_model_bounds(model["name"], probed, expected, MODEL_BOUNDS_SLACK_M)
+        else:
+            errors = {row.get("level"): float(row.get("error_m", 0.0)) for row in manifest.get("lods", [])}
+            slack = errors.get(level, 0.0) + MODEL_BOUNDS_SLACK_M
+            inside = bool(np.all(probed[0] >= expected[0] - slack) and np.all(probed[1] <= expected[1] + slack))
+            found = [] if inside else compare_model_bounds(model["name"], probed, expected, slack)
+        out.setdefault(asset, []).extend(found)
+    return out
+
+
+def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path, dict, list[Path]]],
+                scratch: Path, physics_s: float = 1.0) -> BuildCheck:
+    """Probe every package (its model and variants, each mesh) and the world.
+
+    packages: asset id -> (package folder, manifest, LOD variant folders). scratch: a
+    folder for the probe's own world of packages."""
+    manifests, meshes = {}, {}
+    root = models.resolve()
+    for asset, (folder, manifest, variants) in packages.items():
+        for model in [folder, *variants]:
+            manifests[model.name] = (asset, _variant_level(model.name), manifest)
+        for path in sorted((folder / "meshes").glob("*.dae")):
+            meshes[path.resolve()] = asset
+    report = probe_world(_packages_world(scratch, sorted(manifests)), [models]) if manifests else {}
+    found: dict[str, list[Finding]] = {a: [] for a in packages}
+    for asset, rows in _model_findings(report, manifests).items():
+        found[asset].extend(rows)
+    # the packages' world loaded the meshes its models use; the rest (levels no
+    # variant draws any more) are loaded on their own
+    reports = {str(Path(k).resolve()): v for k, v in report.get("meshes", {}).items()}
+    unread = [p for p in meshes if str(p) not in reports]
+    reports.update({str(Path(k).resolve()): v for k, v in probe_meshes(unread).items()})
+    for f in mesh_findings(list(meshes), reports, lambda p: f"{meshes[p]}/{p.relative_to(root / meshes[p])}"):
+        found[f.site.split("/", 1)[0]].append(f)
+
+    scene, world_counts, figures = [], {}, {}
+    if world is not None:
+        seen = probe_world(world, [models], meshes=False, physics_s=physics_s)
+        figures = {"world": {k: seen["world"][k] for k in ("parse_s", "peak_rss_mb")},
+                   "physics": seen.get("physics", {})}
+        world_counts = {k: seen["world"][k] for k in ("models", "links", "visuals", "collisions")}
+        scene += world_findings(world.name, seen["world"])
+        for model in seen.get("models", []):
+            for use in model["meshes"]:
+                if not use["path"]:
+                    scene.append(finding("GZ009", f"{world.name}/{model['name']}", f"{use['uri']} does not resolve"))
+        physics = seen.get("physics", {})
+        if physics and (not physics.get("ok") or physics.get("failed_shapes")):
+            scene.append(finding("GZ011", world.name, f"dartsim could not build the world: {physics}"))
+    return BuildCheck(found, scene, world_counts, figures)
+
+
+def _variant_level(name: str) -> int:
+    """LOD level of a model folder: <id>__lod<k>, else 0."""
+    head, sep, tail = name.rpartition("__lod")
+    return int(tail) if sep and tail.isdigit() else 0

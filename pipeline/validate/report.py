@@ -16,6 +16,7 @@ import html
 import json
 import os
 import re
+import tempfile
 import time
 import uuid
 from concurrent.futures import ThreadPoolExecutor
@@ -24,7 +25,7 @@ from pathlib import Path
 from lxml import etree
 
 from ..errors import UserError
-from . import external
+from . import external, gazebo
 from .checks import RULES, Finding, check_package, sort_findings
 
 REPORT_FORMAT = 1
@@ -240,10 +241,15 @@ def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
     site, scene_files = _scene_files(out, placements)
     if scene_files["glb"]:
         glb.append(scene_files["glb"])
-    results = _run_external(out, sdf, scene_files["sdf"], usd, scene_files["usda"], glb, dae, clock)
+    with ThreadPoolExecutor(max_workers=1) as side:
+        # Gazebo's own loaders (processes of their own) beside the format validators
+        probe = side.submit(clock.run, "gazebo probe", _gazebo, models, scene_files["sdf"], packages, variants)
+        results = _run_external(out, sdf, scene_files["sdf"], usd, scene_files["usda"], glb, dae, clock)
+        probed = probe.result()
 
     for a in assets:
         a["external"] = _ext_rows(out, a.pop("_files"), results)
+        a["findings"] = _sort_rows(a["findings"] + [_finding_row("gazebo", f) for f in probed.assets.get(a["id"], [])])
     scene_rows = []
     for d in (placements or {}).get("findings", []):
         try:
@@ -255,9 +261,12 @@ def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
         "present": placements is not None,
         "placements": len((placements or {}).get("placements", [])),
         "lod_histogram": {str(k): int(v) for k, v in sorted((placements or {}).get("lod_histogram", {}).items())},
-        "findings": _sort_rows(scene_rows),
+        "findings": _sort_rows(scene_rows + [_finding_row("gazebo", f) for f in probed.scene]),
         "external": _ext_rows(out, [p for p in scene_files.values() if p is not None], results),
+        "gazebo": probed.world,
     }
+    if probed.missing:
+        scene["external"] = _sort_rows_ext(scene["external"] + [probed.missing])
     report = {
         "format": REPORT_FORMAT,
         "summary": _summary(assets, scene),
@@ -266,7 +275,25 @@ def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
         "scene": scene,
     }
     timings = {k: round(v, 6) for k, v in sorted(clock.seconds.items())}
+    if probed.figures:
+        timings["gazebo"] = probed.figures
     return report, timings
+
+
+def _gazebo(models: Path, world: Path | None, packages: list[Path], variants: dict[str, list[Path]]):
+    """validate.gazebo.check_build on this build; without the probe, a skipped row that
+    says how to build it (never a clean report for want of the tool)."""
+    if not gazebo.available():
+        row = {"validator": "gazebo probe", "target": "scene", "status": "skipped", "messages": ["tools/gzprobe is not built"],
+               "install_hint": gazebo.PROBE_HINT}
+        return gazebo.BuildCheck({}, [], {}, {}, missing=row)
+    manifests = {d.name: (d, _read_json(d / "manifest.json") or {}, variants.get(d.name, [])) for d in packages}
+    with tempfile.TemporaryDirectory(prefix="gzprobe-") as scratch:
+        return gazebo.check_build(models, world, manifests, Path(scratch))
+
+
+def _sort_rows_ext(rows: list[dict]) -> list[dict]:
+    return sorted(rows, key=lambda r: (r["target"], r["validator"]))
 
 
 def _summary(assets: list[dict], scene: dict) -> dict:

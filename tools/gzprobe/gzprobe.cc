@@ -44,6 +44,7 @@
 #include <ignition/physics/FeatureList.hh>
 #include <ignition/physics/ForwardStep.hh>
 #include <ignition/physics/RequestEngine.hh>
+#include <ignition/physics/World.hh>
 #include <ignition/physics/mesh/MeshShape.hh>
 #include <ignition/physics/sdf/ConstructCollision.hh>
 #include <ignition/physics/sdf/ConstructLink.hh>
@@ -55,6 +56,7 @@
 #include <sdf/Link.hh>
 #include <sdf/Mesh.hh>
 #include <sdf/Model.hh>
+#include <sdf/Physics.hh>
 #include <sdf/Root.hh>
 #include <sdf/Visual.hh>
 #include <sdf/World.hh>
@@ -319,6 +321,15 @@ struct ModelSummary
 
 Matrix PoseMatrix(const ignition::math::Pose3d &pose) { return Matrix(pose); }
 
+// A pose resolved through the frame graph (relative_to, frames), as gz-sim's
+// ResolveSdfPose does; the raw pose where it cannot be resolved.
+ignition::math::Pose3d Resolved(const sdf::SemanticPose &semantic, const std::string &to,
+                                 const ignition::math::Pose3d &raw)
+{
+  ignition::math::Pose3d pose;
+  return semantic.Resolve(pose, to).empty() ? pose : raw;
+}
+
 std::vector<ModelSummary> Summaries(const sdf::World &world)
 {
   std::vector<ModelSummary> out;
@@ -329,7 +340,8 @@ std::vector<ModelSummary> Summaries(const sdf::World &world)
     for (uint64_t l = 0; l < model->LinkCount(); ++l)
     {
       const sdf::Link *link = model->LinkByIndex(l);
-      const Matrix modelFromLink = PoseMatrix(link->RawPose());
+      const Matrix modelFromLink =
+          PoseMatrix(Resolved(link->SemanticPose(), "__model__", link->RawPose()));
       auto add = [&](const std::string &kind, const sdf::Geometry *geom,
                      const ignition::math::Pose3d &pose) {
         if (!geom || geom->Type() != sdf::GeometryType::MESH || !geom->MeshShape())
@@ -342,9 +354,16 @@ std::vector<ModelSummary> Summaries(const sdf::World &world)
                                   modelFromLink * PoseMatrix(pose), mesh->Scale()});
       };
       for (uint64_t v = 0; v < link->VisualCount(); ++v)
-        add("visual", link->VisualByIndex(v)->Geom(), link->VisualByIndex(v)->RawPose());
+      {
+        const sdf::Visual *visual = link->VisualByIndex(v);
+        add("visual", visual->Geom(), Resolved(visual->SemanticPose(), link->Name(), visual->RawPose()));
+      }
       for (uint64_t c = 0; c < link->CollisionCount(); ++c)
-        add("collision", link->CollisionByIndex(c)->Geom(), link->CollisionByIndex(c)->RawPose());
+      {
+        const sdf::Collision *collision = link->CollisionByIndex(c);
+        add("collision", collision->Geom(),
+            Resolved(collision->SemanticPose(), link->Name(), collision->RawPose()));
+      }
     }
     out.push_back(summary);
   }
@@ -383,7 +402,19 @@ using PhysicsFeatures = ignition::physics::FeatureList<
     ignition::physics::sdf::ConstructSdfLink,
     ignition::physics::sdf::ConstructSdfCollision,
     ignition::physics::mesh::AttachMeshShapeFeature,
+    ignition::physics::CollisionDetector,
     ignition::physics::ForwardStep>;
+
+// <physics><dart><collision_detector>, which gz-sim hands to SetCollisionDetector when
+// the world names one (SdfEntityCreator reads it; Physics applies it).
+std::string NamedCollisionDetector(const sdf::World &world)
+{
+  const sdf::Physics *physics = world.PhysicsDefault();
+  if (!physics || !physics->Element() || !physics->Element()->HasElement("dart")) return "";
+  sdf::ElementPtr dart = physics->Element()->GetElement("dart");
+  if (!dart->HasElement("collision_detector")) return "";
+  return dart->Get<std::string>("collision_detector");
+}
 
 std::string DartsimPluginPath()
 {
@@ -409,6 +440,8 @@ std::string Physics(const sdf::World &world, double seconds)
   emptyWorld.SetName(world.Name());
   emptyWorld.SetGravity(world.Gravity());
   auto physicsWorld = engine->ConstructWorld(emptyWorld);
+  const std::string detector = NamedCollisionDetector(world);
+  if (!detector.empty()) physicsWorld->SetCollisionDetector(detector);
   int meshShapes = 0, primitiveShapes = 0, failed = 0;
   for (uint64_t m = 0; m < world.ModelCount(); ++m)
   {
@@ -424,7 +457,7 @@ std::string Physics(const sdf::World &world, double seconds)
       const sdf::Link *sourceLink = source->LinkByIndex(l);
       sdf::Link link;
       link.SetName(sourceLink->Name());
-      link.SetRawPose(sourceLink->RawPose());
+      link.SetRawPose(Resolved(sourceLink->SemanticPose(), "__model__", sourceLink->RawPose()));
       link.SetInertial(sourceLink->Inertial());
       auto physicsLink = physicsModel->ConstructLink(link);
       for (uint64_t c = 0; c < sourceLink->CollisionCount(); ++c)
@@ -437,14 +470,18 @@ std::string Physics(const sdf::World &world, double seconds)
           const auto *mesh = ignition::common::MeshManager::Instance()->Load(
               ResolveUri(meshSdf->Uri(), meshSdf->FilePath()));
           if (!mesh) { ++failed; continue; }
-          physicsLink->AttachMeshShape(collision->Name(), *mesh,
-                                       ignition::math::eigen3::convert(collision->RawPose()),
+          const auto pose = Resolved(collision->SemanticPose(), sourceLink->Name(), collision->RawPose());
+          physicsLink->AttachMeshShape(collision->Name(), *mesh, ignition::math::eigen3::convert(pose),
                                        ignition::math::eigen3::convert(meshSdf->Scale()));
           ++meshShapes;
         }
         else
         {
-          if (physicsLink->ConstructCollision(*collision)) ++primitiveShapes; else ++failed;
+          // gz-sim hands dartsim a collision whose pose it resolved into the link frame
+          sdf::Collision resolved = *collision;
+          resolved.SetRawPose(Resolved(collision->SemanticPose(), sourceLink->Name(), collision->RawPose()));
+          resolved.SetPoseRelativeTo("");
+          if (physicsLink->ConstructCollision(resolved)) ++primitiveShapes; else ++failed;
         }
       }
     }
@@ -463,7 +500,8 @@ std::string Physics(const sdf::World &world, double seconds)
   const double wall = Seconds(stepStart);
   const double simulated = steps * 0.001;
   std::ostringstream out;
-  out << "{\"ok\":true,\"engine\":\"dartsim\",\"build_s\":" << Num(buildSeconds)
+  out << "{\"ok\":true,\"engine\":\"dartsim\",\"collision_detector\":"
+      << Quote(physicsWorld->GetCollisionDetector()) << ",\"build_s\":" << Num(buildSeconds)
       << ",\"mesh_shapes\":" << meshShapes << ",\"primitive_shapes\":" << primitiveShapes
       << ",\"failed_shapes\":" << failed << ",\"steps\":" << steps << ",\"step_s\":0.001"
       << ",\"wall_s\":" << Num(wall)
