@@ -136,23 +136,45 @@ class Material:
         return float(self.base_color[3])
 
     def phong(self) -> Phong:
-        """Phong parameters derived from the PBR ones.
+        """The COLLADA <phong> effect: what Gazebo 11 (OGRE 1, fixed function) lights a
+        mesh with when the SDF visual says nothing, and gz-sim copies (metalness 0).
+        As sdf_phong, but a metal's highlight takes its base colour (classic Phong has
+        no Fresnel to tint it). Opacity is the writer's <transparency>, not an alpha."""
+        return self._gazebo(tinted_specular=True)
 
-        Metals tint their specular with the base colour and have almost no diffuse
-        term; dielectrics reflect about 4 % white. Shininess follows the usual
-        Blinn-Phong/GGX correspondence 2 / roughness^4 - 2, clamped to 1..128.
+    def sdf_phong(self) -> Phong:
+        """The SDF <material> colours, which both Gazebo generations read beside
+        <pbr><metal> (metalness, roughness):
+
+        - diffuse = base colour, alpha 1. gz-rendering's Ogre2Material::SetDiffuse is the
+          PBS albedo, and Ogre's metallic workflow takes F0 = lerp(0.03, albedo,
+          metalness): a black diffuse renders a metal black. Opacity comes from the
+          visual's <transparency> alone (Ogre2Material multiplies it by diffuse alpha:
+          an alpha here too would square it).
+        - specular = lerp(0.5 (1 - roughness)^2, 1, metallic), grey. Ogre2 multiplies
+          every reflection by it (kS): 1 for metals keeps their reflections whole; less
+          for rough dielectrics. Gazebo 11 adds it as a Phong highlight of exponent
+          `shininess` (its COLLADA effect's, the SDF has none), untinted.
+        - ambient = base colour (Gazebo 11 multiplies it by the scene's ambient light;
+          ogre2 ignores it); emissive = the emission, clipped to 0..1.
         """
+        return self._gazebo(tinted_specular=False)
+
+    def _gazebo(self, tinted_specular: bool) -> Phong:
         r, g, b, a = self.base_color
         m = float(np.clip(self.metallic, 0.0, 1.0))
         rough = float(np.clip(self.roughness, 0.02, 1.0))
-        diffuse = tuple(float(c * (1.0 - m)) for c in (r, g, b))
-        spec = tuple(float(0.04 * (1.0 - m) + c * m) for c in (r, g, b))
-        ambient = tuple(float(0.3 * c) for c in (r, g, b))
+        # a dielectric's highlight fades as it roughens; shininess is the Blinn-Phong
+        # exponent that matches GGX at alpha = roughness^2
+        dielectric = 0.5 * (1.0 - rough) ** 2
+        top = (r, g, b) if tinted_specular else (1.0, 1.0, 1.0)
+        spec = tuple(float(dielectric * (1.0 - m) + c * m) for c in top)
         shininess = float(np.clip(2.0 / rough**4 - 2.0, 1.0, 128.0))
         e = tuple(float(np.clip(c, 0.0, 1.0)) for c in self.emission)
+        colour = tuple(float(c) for c in (r, g, b))
         return Phong(
-            ambient=(*ambient, a),
-            diffuse=(*diffuse, a),
+            ambient=(*colour, float(a)),
+            diffuse=(*colour, 1.0),
             specular=(*spec, 1.0),
             emissive=(*e, 1.0),
             shininess=shininess,

@@ -124,7 +124,9 @@ def test_dae_content_reads_back(built):
             assert tuple(effect.emission) == phong.emissive
             assert tuple(effect.diffuse) == phong.diffuse
             assert effect.shininess == phong.shininess
+            # opacity is <transparency> (A_ONE), the diffuse alpha 1 (gz-rendering multiplies them)
             assert effect.transparency == asset.material(visual.material).alpha
+            assert effect.diffuse[3] == 1.0
 
 
 def test_sdf_packages_pass_libsdformat(built):
@@ -215,7 +217,7 @@ def test_materials_in_sdf(built):
     model = _parse(parent / ASSET_ID / "model.sdf").getroot().find("model")
     for link, v in asset.visuals():
         mat = asset.material(v.material)
-        p = mat.phong()
+        p = mat.sdf_phong()
         el = model.find(f"link[@name='{link.name}']/visual[@name='{v.name}']/material")
         for tag in ("ambient", "diffuse", "specular", "emissive"):
             assert tuple(float(t) for t in el.findtext(tag).split()) == getattr(p, tag)
@@ -238,7 +240,7 @@ def test_static_model_and_visual_overrides(tmp_path):
     model = _parse(tmp_path / "v" / "model.sdf").getroot().find("model")
     assert model.get("name") == "test_arm__alarm"
     gauge = model.find("link[@name='gauge']")
-    steel = asset.material("steel").phong()
+    steel = asset.material("steel").sdf_phong()
     assert gauge.findtext("visual[@name='oil_level']/material/diffuse") == " ".join(map(names.fmt, steel.diffuse))
     np.testing.assert_allclose(_pose(gauge.find("visual[@name='needle']")), turned, atol=1e-12)
     np.testing.assert_allclose(_pose(gauge.find("visual[@name='oil_level']")), asset.link("gauge").visuals[1].pose,

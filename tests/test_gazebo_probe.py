@@ -158,3 +158,25 @@ def test_a_crash_is_a_finding_not_the_end(tmp_path):
     assert reports[str(good)]["ok"]
     findings = gazebo.mesh_findings([bad, good], reports, lambda p: p.name)
     assert findings and all(f.site == "bad.dae" for f in findings)
+
+
+@pytest.mark.parametrize("material", [
+    ir.Material("chrome", base_color=(0.9, 0.6, 0.3, 1.0), metallic=1.0, roughness=0.2),
+    ir.Material("paint", base_color=(0.1, 0.5, 0.2, 1.0), metallic=0.0, roughness=0.8),
+    ir.Material("glass", base_color=(0.7, 0.8, 0.9, 0.4), metallic=0.0, roughness=0.05, emission=(0.2, 0.1, 0.0)),
+], ids=lambda m: m.name)
+def test_gazebo_reads_the_material_as_mapped(tmp_path, material):
+    """The effect as gz-common reads it: diffuse is the base colour even for a metal
+    (ogre2 takes it as albedo; black renders a metal black), the opacity its
+    transparency, the classic specular tinted by the base colour for metals, never black."""
+    path = _written(tmp_path, material.name, _one_triangle(), material)
+    (seen,) = gazebo.probe_meshes([path])[str(path)]["materials"]
+    r, g, b, a = material.base_color
+    np.testing.assert_allclose(seen["diffuse"], [r, g, b, 1.0], atol=1e-6)
+    assert seen["transparency"] == pytest.approx(1.0 - a)
+    np.testing.assert_allclose(seen["ambient"][:3], [r, g, b], atol=1e-6)
+    np.testing.assert_allclose(seen["emissive"][:3], material.emission, atol=1e-6)
+    np.testing.assert_allclose(seen["specular"], material.phong().specular, atol=1e-6)
+    assert min(seen["specular"][:3]) > 0 and seen["shininess"] == pytest.approx(material.phong().shininess)
+    if material.metallic == 1.0:
+        np.testing.assert_allclose(seen["specular"][:3], [r, g, b], atol=1e-6)

@@ -107,6 +107,8 @@ def _dae_bytes(node_name: str, mesh: ir.Mesh, material: ir.Material | None) -> b
     doc.save()
     root = doc.xmlnode.getroot()
     _reformat_floats(root, arrays)
+    for el in root.iter("{*}transparent"):
+        el.set("opaque", "A_ONE")  # pycollada writes the attribute only for RGB_ZERO
     return etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True)
 
 
@@ -177,6 +179,10 @@ def _sources(ident: str, mesh: ir.Mesh):
 
 
 def _phong_material(doc, material: ir.Material):
+    # ir.Material.phong: the classic Phong terms. Opacity is <transparency> under
+    # <transparent opaque="A_ONE"> (colour 0 0 0 1): gz-common's LoadTransparent takes
+    # 1 - alpha x transparency as the transparency, and ignores both without the
+    # `opaque` attribute; the diffuse alpha stays 1 (gz-rendering multiplies the two)
     p = material.phong()
     ident = names.safe_name(material.name)
     effect = dae_material.Effect(

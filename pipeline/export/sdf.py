@@ -178,7 +178,15 @@ def _material(visual_el, asset: ir.Asset, visual_name: str, material_name: str) 
     except KeyError:
         raise UserError(asset.source or asset.id, visual_name,
                         f"material {material_name!r} is not among the asset's materials") from None
-    p = mat.phong()
+    material_element(visual_el, mat)
+
+
+def material_element(visual_el, mat: ir.Material) -> None:
+    """visual_el's <material> (replacing any) and <transparency>, from the Principled
+    inputs through ir.Material.sdf_phong (its docstring gives the mapping)."""
+    for old in visual_el.findall("material") + visual_el.findall("transparency"):
+        visual_el.remove(old)
+    p = mat.sdf_phong()
     el = _sub(visual_el, "material")
     for tag, rgba in (("ambient", p.ambient), ("diffuse", p.diffuse),
                       ("specular", p.specular), ("emissive", p.emissive)):
@@ -187,7 +195,7 @@ def _material(visual_el, asset: ir.Asset, visual_name: str, material_name: str) 
     _sub(metal, "metalness", names.fmt(mat.metallic))
     _sub(metal, "roughness", names.fmt(mat.roughness))
     if mat.alpha < 1.0:
-        # Classic renderers read the visual's <transparency>, not the colour alpha.
+        # Both generations read the visual's <transparency>, not the colour alpha.
         _sub(visual_el, "transparency", names.fmt(1.0 - mat.alpha))
 
 

@@ -26,7 +26,7 @@ import numpy as np
 from lxml import etree
 
 from .. import ir
-from ..export import names
+from ..export import names, sdf
 from ..geometry.transform import matrix_to_xyz_rpy
 from . import nodes, sun as sunmod
 
@@ -68,15 +68,7 @@ def quantise(value: float, domain, quantum: float) -> float:
 def _material(visual_el, record: dict) -> None:
     m = ir.Material(record["name"], tuple(record["base_color"]), record["metallic"], record["roughness"],
                     tuple(record["emission"]))
-    p = m.phong()
-    for old in visual_el.findall("material"):
-        visual_el.remove(old)
-    el = etree.SubElement(visual_el, "material")
-    for tag, rgba in (("ambient", p.ambient), ("diffuse", p.diffuse), ("specular", p.specular), ("emissive", p.emissive)):
-        etree.SubElement(el, tag).text = " ".join(_f(c) for c in rgba)
-    metal = etree.SubElement(etree.SubElement(el, "pbr"), "metal")
-    etree.SubElement(metal, "metalness").text = _f(m.metallic)
-    etree.SubElement(metal, "roughness").text = _f(m.roughness)
+    sdf.material_element(visual_el, m)
 
 
 def build_variant(model_sdf: bytes, name: str, states: list[nodes.VisualState], materials: dict) -> bytes:
