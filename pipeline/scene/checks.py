@@ -2,7 +2,8 @@
 
 PLACE001 unknown asset          PLACE002 duplicate TAG
 PLACE003 outside every platform of its level (warning: on a slope)
-PLACE004 footprints overlap beyond tolerance
+PLACE004 footprints overlap beyond tolerance: one finding per cluster of placements
+         that overlap one another (a connected component of the overlap graph)
 PLACE005 base not on the terrain (over 1 cm)
 Each finding is a dict {code, severity, site, message}, sorted for stable reports.
 """
@@ -18,6 +19,11 @@ from .. import ir
 
 OVERLAP_TOLERANCE_M = 0.10
 BASE_TOLERANCE_M = 0.01
+# A cluster's finding names this many of its placements, then says how many more.
+LISTED_TAGS = 5
+# Candidate pairs handed on at a time: a pile of placements has as many pairs as the
+# square of its size, so they are tested in chunks and the ones already joined skipped.
+PAIR_CHUNK = 1 << 16
 
 
 def finding(code: str, severity: str, site: str, message: str) -> dict:
@@ -85,20 +91,81 @@ def penetrations(a: Footprints, b: Footprints) -> np.ndarray:
     return depth
 
 
-def box_pairs(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _grid(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cell index ranges (n, 2) int64, first and last, of each box in a uniform grid
+    whose cells are the boxes' median size, but at least 1/32 of the largest (no box
+    covers more than about 33 x 33 cells) and 2^-20 of the whole span (cell keys stay
+    far inside int64)."""
+    extent = (hi - lo).max(axis=1)
+    span = float((hi.max(axis=0) - lo.min(axis=0)).max())
+    size = max(float(np.median(extent)), float(extent.max()) / 32.0, span / 2.0**20)
+    if not size > 0.0:
+        size = 1.0  # points only: any cell size holds them
+    origin = lo.min(axis=0)
+    return np.floor((lo - origin) / size).astype(np.int64), np.floor((hi - origin) / size).astype(np.int64)
+
+
+def box_pair_chunks(lo: np.ndarray, hi: np.ndarray, chunk: int = PAIR_CHUNK):
     """Index pairs (i, j), i != j each pair once, of the axis-aligned boxes lo, hi:
-    (n, 2) that meet: a sweep along x (each box against those starting before it
-    ends), then the y ranges."""
-    order = np.argsort(lo[:, 0], kind="stable")
-    starts = lo[order, 0]
-    ends = np.searchsorted(starts, hi[order, 0], side="right")  # > its own position
-    first = np.arange(1, len(order) + 1)
-    counts = np.maximum(ends - first, 0)
-    i = np.repeat(order, counts)
-    offsets = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    j = order[np.repeat(first, counts) + offsets]
-    meet = (lo[j, 1] <= hi[i, 1]) & (lo[i, 1] <= hi[j, 1])
-    return i[meet], j[meet]
+    (n, 2) that meet, as a run of (i, j) arrays from about `chunk` candidates each.
+
+    A uniform grid (_grid) holds each box in every cell it covers; the boxes sharing
+    a cell are the candidates, and a pair is kept in one cell only: the cell of its
+    overlap's lower corner (the larger of the two boxes' first cells)."""
+    lo, hi = np.asarray(lo, dtype=np.float64).reshape(-1, 2), np.asarray(hi, dtype=np.float64).reshape(-1, 2)
+    if len(lo) < 2:
+        return
+    first, last = _grid(lo, hi)
+    wide = last - first + 1
+    covered = wide[:, 0] * wide[:, 1]
+    box = np.repeat(np.arange(len(lo)), covered)
+    k = np.arange(len(box)) - np.repeat(np.cumsum(covered) - covered, covered)
+    cell = first[box] + np.c_[k % wide[box, 0], k // wide[box, 0]]
+    key = cell[:, 0] * (int(last[:, 1].max()) + 1) + cell[:, 1]
+    order = np.argsort(key, kind="stable")
+    box, cell, key = box[order], cell[order], key[order]
+    ends = np.searchsorted(key, key, side="right")  # one past each entry's cell group
+    after = ends - np.arange(len(key)) - 1  # the entries after each one in its cell
+    bounds = np.searchsorted(np.cumsum(after), np.arange(chunk, int(after.sum()) + chunk, chunk), side="right")
+    start = 0
+    for stop in np.minimum(np.r_[bounds, len(key)], len(key)):
+        if stop <= start:
+            continue
+        p = np.repeat(np.arange(start, stop), after[start:stop])
+        q = p + 1 + np.arange(len(p)) - np.repeat(np.cumsum(after[start:stop]) - after[start:stop], after[start:stop])
+        i, j = box[p], box[q]
+        keep = ((lo[j] <= hi[i]) & (lo[i] <= hi[j])).all(axis=1)
+        keep &= (np.maximum(first[i], first[j]) == cell[p]).all(axis=1)
+        yield i[keep], j[keep]
+        start = stop
+
+
+def overlap_clusters(boxes: Footprints, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The connected components of the overlap graph of n footprints (an edge where two
+    overlap by more than `tolerance`): a label (n,) int per footprint, shared by the
+    members of a component, and the depth (n,) of the deepest overlap tested within
+    each label's component (0 where none). A pair whose footprints are already joined
+    is not tested, so a component of two has its depth and a larger one a lower bound."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(boxes.corners)
+    label = np.arange(n)
+    deepest = np.zeros(n)
+    for i, j in box_pair_chunks(boxes.corners.min(axis=1), boxes.corners.max(axis=1)):
+        apart = label[i] != label[j]
+        i, j = i[apart], j[apart]
+        depth = penetrations(boxes.take(i), boxes.take(j))
+        hit = depth > tolerance
+        if not hit.any():
+            continue
+        edges = coo_matrix((np.ones(int(hit.sum())), (label[i[hit]], label[j[hit]])), shape=(n, n))
+        joined = connected_components(edges, directed=False)[1]
+        merged = np.zeros(n)
+        np.maximum.at(merged, joined, deepest)
+        np.maximum.at(merged, joined[label[i[hit]]], depth[hit])
+        label, deepest = joined[label], merged
+    return label, deepest[label]
 
 
 def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict], terrain_z: np.ndarray) -> list[dict]:
@@ -141,11 +208,32 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
     kept = [pl for pl in placed if pl.placement.asset_id in manifests]
     if kept:
         bounds = np.array([manifests[pl.placement.asset_id]["bounds"] for pl in kept], dtype=np.float64)
-        boxes = footprints(np.array([pl.pose for pl in kept]), bounds[:, 0], bounds[:, 1])
-        i, j = box_pairs(boxes.corners.min(axis=1), boxes.corners.max(axis=1))
-        depth = penetrations(boxes.take(i), boxes.take(j))
-        for first, second, d in zip(i, j, depth):
-            if d > OVERLAP_TOLERANCE_M:
-                a, b = sorted((kept[first].placement.tag, kept[second].placement.tag))
-                out.append(finding("PLACE004", "warning", f"{a}|{b}", f"footprints of {a} and {b} overlap by {d:.2f} m"))
+        poses = np.array([pl.pose for pl in kept])
+        label, depth = overlap_clusters(footprints(poses, bounds[:, 0], bounds[:, 1]), OVERLAP_TOLERANCE_M)
+        out += _overlap_findings([pl.placement.tag for pl in kept], poses[:, :3, 3], label, depth)
     return sorted(out, key=lambda f: (f["code"], f["site"]))
+
+
+def _overlap_findings(tags: list[str], positions: np.ndarray, label: np.ndarray, depth: np.ndarray) -> list[dict]:
+    """One PLACE004 per cluster of two or more (overlap_clusters' labels): a pair with
+    its depth, a larger cluster with its size, how many of it share one point (blocks
+    inserted at one spot), and its first tags."""
+    out = []
+    order = np.argsort(label, kind="stable")
+    groups = np.split(order, np.flatnonzero(np.diff(label[order])) + 1)
+    for members in (g for g in groups if len(g) > 1):
+        names = sorted(tags[m] for m in members)
+        if len(names) == 2:
+            a, b = names
+            out.append(finding("PLACE004", "warning", f"{a}|{b}",
+                               f"footprints of {a} and {b} overlap by {depth[members[0]]:.2f} m"))
+            continue
+        n, shown = len(names), names[:LISTED_TAGS]
+        spots = np.unique(np.round(positions[members] * 1000.0), axis=0, return_counts=True)[1]
+        piled = f"; {spots.max()} of them at one point" if spots.max() > 1 else ""
+        more = f" and {n - len(shown)} more" if n > len(shown) else ""
+        site = "|".join(names[:3]) + (f"|and {n - 3} more" if n > 3 else "")
+        out.append(finding("PLACE004", "warning", site,
+                           f"footprints of {n} placements overlap, each by more than {OVERLAP_TOLERANCE_M:.2f} m "
+                           f"with one or more of the others{piled}: {', '.join(shown)}{more}"))
+    return out
