@@ -33,7 +33,20 @@ def rows(sections: dict) -> list[dict]:
     out += _blender_rows(data.get("blender"))
     out += _gltf_transform_rows(data.get("gltf_transform"))
     out += _render_rows(data.get("render"))
+    out += _gazebo_rows(data.get("gazebo"))
     return [r for r in out if r is not None]
+
+
+def _gazebo_rows(d):
+    """The world as written against one include per placement (the earlier layout)."""
+    before = (d or {}).get("one_include_per_placement")
+    if not before:
+        return []
+    note = f"sdf::Root::Load of the sample world, {d['placements']} placements (tools/gzprobe)"
+    return [_row("gazebo", "world parse peak memory", d["world"]["peak_rss_mb"], before["peak_rss_mb"], "MB",
+                 "one <include> per placement", note),
+            _row("gazebo", "world parse time", d["world"]["parse_s"], before["parse_s"], "s",
+                 "one <include> per placement", note)]
 
 
 def _lod_rows(d):

@@ -97,7 +97,7 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         else:
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
-        world.append(_grouped_model(variant, Path(models) / variant / "model.sdf", members))
+        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members))
     data = etree.tostring(sdf, pretty_print=True, xml_declaration=True, encoding="UTF-8")
     Path(path).write_bytes(data)
 
@@ -117,7 +117,7 @@ def _pose_text(matrix: np.ndarray) -> str:
     return " ".join(fmt(v) for v in (*xyz.tolist(), *rpy.tolist()))
 
 
-def _grouped_model(variant: str, model_sdf: Path, members: list[Placed]) -> etree._Element:
+def grouped_model(variant: str, model_sdf: Path, members: list[Placed]) -> etree._Element:
     """One static model with one link: per member placement a frame named by its TAG at
     its pose, and the variant's visuals and collisions posed relative to that frame."""
     source = etree.parse(str(model_sdf), _parser()).getroot().find("model")
