@@ -70,6 +70,12 @@ def test_validation_report_has_no_errors(sample):
     assert report["summary"]["errors"] == 0
     assert (sample / "reports" / "validation.html").is_file()
     assert (sample / "reports" / "junit.xml").is_file()
+    # Gazebo's own loaders read every mesh and the world (tools/gzprobe): no GZ finding
+    # at all, the world within its parse budget, dartsim able to build every shape
+    assert not [c for c in report["summary"]["by_code"] if c.startswith("GZ")], report["summary"]["by_code"]
+    assert report["scene"]["gazebo"]["models"] < 100 and report["scene"]["gazebo"]["visuals"] > 0
+    figures = json.loads((sample / "reports" / "timings.json").read_text())["gazebo"]
+    assert figures["world"]["peak_rss_mb"] < 1536 and figures["physics"]["failed_shapes"] == 0
 
 
 def test_oil_leak_scenario_runs_on_the_sample(sample):
