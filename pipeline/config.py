@@ -148,7 +148,6 @@ class FloorplanOptions:
     insert_scale: str = "ignore"
     units: str | None = None
     grid_scale: float = 1.0
-    site_toml: str = "site.toml"
 
 
 @dataclass(frozen=True)
@@ -311,7 +310,6 @@ def _floorplan_options(data: dict, path: Path) -> FloorplanOptions:
         insert_scale=fp["insert_scale"],
         units=data["plan"].get("units"),
         grid_scale=float(data["plan"]["grid_scale"]),
-        site_toml=str(path),
     )
 
 

@@ -134,6 +134,7 @@ def test_unitless_needs_plan_units_and_inches_are_read(tmp_path):
 BAD = {
     "duplicate_tag": ([insert("circuit_breaker", "52-1A"), insert("current_transformer", "52-1A", at=(5, 0, 0))], "52-1A", "duplicate TAG"),
     "unknown_level": ([insert("circuit_breaker", "52-1A", level="L9")], "52-1A", "LEVEL 'L9'"),
+    "unknown_block": ([insert("wave_trapp", "LT-1A")], "LT-1A", "'wave_trapp' is not an asset (no sources/assets/wave_trapp/)"),
     "missing_level": ([insert("circuit_breaker", "52-1A", level=None)], "52-1A", "no LEVEL"),
     "negative_scale": ([insert("circuit_breaker", "52-1A", scale=(-1, 1, 1))], "52-1A", "mirrored"),
     "non_uniform_scale": ([insert("circuit_breaker", "52-1A", scale=(1, 2, 1))], "52-1A", "non-uniform"),
@@ -158,8 +159,8 @@ def test_missing_tag_is_derived_from_the_handle(tmp_path):
     assert p.tag == f"insert_{handle}" and p.dxf_handles == (handle,)
 
 
-def test_unknown_block_is_left_out_with_a_warning(tmp_path):
-    path = make_dxf(tmp_path / "a.dxf", [insert("wave_trapp", "LT-1A"), insert("circuit_breaker", "52-1A")])
+def test_untagged_unknown_block_is_left_out_with_a_warning(tmp_path):
+    path = make_dxf(tmp_path / "a.dxf", [insert("wave_trapp", None), insert("circuit_breaker", "52-1A")])
     fp = read_floorplan(path, known_assets=asset_ids(), levels=LEVELS)
     assert [p.tag for p in fp.placements] == ["52-1A"]
     (left_out,) = [w for w in fp.warnings if "left out" in w]

@@ -409,7 +409,7 @@ def test_block_mapping_patterns_and_asset_names(tmp_path):
         doc.blocks.new(name).add_line((0, 0), (1, 0))
     msp = doc.modelspace()
     for i, name in enumerate(("A$C10FB1B64", "CB-500kV", "cb-500KV", "变压器", "breaker", "Other", "Other")):
-        tagged(msp.add_blockref(name, (i, 0)), f"T-{i}")
+        tagged(msp.add_blockref(name, (i, 0)), f"T-{i}" if name != "Other" else None)
     blocks = (("CB-*", "breaker"), ("a$c10fb1b64", "breaker"), ("变压器", "transformer"), ("*kV", "nothing"))
     doc.saveas(tmp_path / "plan.dxf")
     fp, problems = scan_floorplan(tmp_path / "plan.dxf", {"breaker", "transformer"}, {"L1"},
@@ -420,9 +420,25 @@ def test_block_mapping_patterns_and_asset_names(tmp_path):
     (left_out,) = [w for w in fp.warnings if "left out" in w]
     assert left_out.startswith("2 INSERTs of 1 blocks place nothing") and "Other x2" in left_out
     fp, problems = scan_floorplan(tmp_path / "plan.dxf", {"breaker"}, {"L1"},
-                                  FloorplanOptions(blocks=(("变压器", "transfomer"),), site_toml="s/site.toml"))
-    (p,) = problems
-    assert "'transfomer'" in p.message and "s/site.toml [floorplan] blocks" in p.message and "T-3" in p.obj
+                                  FloorplanOptions(blocks=(("变压器", "transfomer"),)))
+    assert sorted(q.obj.split()[1] for q in problems) == ["T-0", "T-1", "T-2", "T-3"]  # tagged, none mapped
+    (p,) = [q for q in problems if "T-3" in q.obj]
+    assert "'transfomer'" in p.message and "site.toml [floorplan] blocks" in p.message and "T-3" in p.obj
+
+
+def test_tagged_insert_of_no_asset_is_an_error(tmp_path):
+    """A tagged INSERT is equipment: an unknown block is an error, not a warning, and
+    the hint is one a user can follow."""
+    doc = new_doc()
+    for name in ("变压器", "breakr"):
+        doc.blocks.new(name).add_line((0, 0), (1, 0))
+        tagged(doc.modelspace().add_blockref(name, (0, 0)), f"T-{name}")
+    fp, problems = read(doc, tmp_path)
+    cjk, typo = sorted(problems, key=lambda p: "变压器" not in p.message)
+    assert "'变压器' is not an asset and site.toml [floorplan] blocks maps it to none" in cjk.message
+    assert "sources/assets" not in cjk.message  # no such folder name can exist
+    assert "(no sources/assets/breakr/)" in typo.message and "did you mean asset 'breaker'?" in typo.message
+    assert not [w for w in fp.warnings if "left out" in w]
 
 
 def test_duplicate_tags_of_nested_inserts_name_both_chains(tmp_path):
@@ -461,8 +477,7 @@ def test_site_toml_floorplan_and_units(tmp_path):
     assert o.blocks == (("CB*", "breaker"), ("A$C1", "breaker"))
     assert (o.tag_attribute, o.level_attribute, o.state_attribute) == ("KKS", "LEVEL", "STATE")
     assert (o.default_level, o.insert_scale, o.units, o.grid_scale) == ("L2", "apply", "ft", 0.9996)
-    assert load_site(write_site(tmp_path / "plain")).floorplan_options == FloorplanOptions(
-        site_toml=str(tmp_path / "plain" / "site.toml"))
+    assert load_site(write_site(tmp_path / "plain")).floorplan_options == FloorplanOptions()
     for plan, floorplan, key in (("", '[floorplan]\ndefault_level = "L9"', "floorplan.default_level"),
                                  ('units = "furlong"', "", "plan.units"),
                                  ("", '[floorplan]\nblocks = { "X" = "Not An Id" }', "floorplan.blocks.X"),

@@ -115,7 +115,7 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
     """What the sources hold. `memo`: a file where the floor plan read last time is
     kept with its key, so that a no-op build does not parse the DXF again; `checked`:
     a file of the config checks that passed, so that it does not check them again."""
-    from ..ingest.floorplan import read_floorplan_memo, require_placements_and_platforms
+    from ..ingest.floorplan import read_floorplan_memo
 
     sources = Path(sources)
     before = _read_passed(checked)
@@ -128,7 +128,6 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
         _write_passed(checked, passed.met)
     plan_path = site.root / site.floorplan
     fp = read_floorplan_memo(plan_path, set(assets), set(site.level_names), memo, site.floorplan_options)
-    require_placements_and_platforms(fp)
     placed = {p.asset_id for p in fp.placements}
     used = sorted(placed | (scenario_assets(sources) & set(assets)))
     unused = sorted(set(assets) - set(used))
@@ -162,7 +161,7 @@ def _write_passed(path: Path, passed: set[str]) -> None:
 def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path | None = None) -> Plan:
     """The task graph for a sources folder. `only`: just these assets' packages;
     `cache`: the cache folder the build uses (default: in the build folder)."""
-    from ..ingest.floorplan import MEMO_NAME
+    from ..ingest.floorplan import MEMO_NAME, require_placements_and_platforms
     from .cache import cache_root
 
     p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME)
@@ -220,6 +219,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             warm=PACKAGE_WARM,
         ))
     if not only:
+        require_placements_and_platforms(p.floorplan)
         p.tasks.extend(scene_tasks(p, Path(sources), Path(build)))
     return p
 

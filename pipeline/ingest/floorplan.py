@@ -42,6 +42,7 @@ UNITS = {
 UNIT_BY_NAME = {name: (name, metres) for name, metres in UNITS.values()}
 PLATFORM_PREFIX = "PLATFORM_"
 SAFE_TAG = re.compile(r"^(?!.*\.\.)[A-Za-z0-9_][A-Za-z0-9_.-]*$")
+ASSET_ID = re.compile(r"^[a-z0-9][a-z0-9_]*$")  # config.SAFE_ID
 # Arcs in a platform outline are flattened to this chord error (drawing metres).
 ARC_TOLERANCE_M = 0.01
 # An INSERT chain whose linear part has singular values within this (relative) of each
@@ -173,11 +174,11 @@ def _units(doc, path: Path, options) -> tuple[str, float]:
             return f"{name} ([plan] units; $INSUNITS says {UNITS[code][0]})", to_m
         return name, to_m
     if code == 0:
-        raise UserError(path, "$INSUNITS", f"the drawing is unitless ($INSUNITS 0): say its unit in "
-                                           f"{options.site_toml} [plan] units (m, mm, cm, in, ft, ...)")
+        raise UserError(path, "$INSUNITS", "the drawing is unitless ($INSUNITS 0): say its unit in "
+                                           "site.toml [plan] units (m, mm, cm, in, ft, ...)")
     if code not in UNITS:
         raise UserError(path, "$INSUNITS", f"unknown drawing unit code {code}: say its unit in "
-                                           f"{options.site_toml} [plan] units (m, mm, cm, in, ft, ...)")
+                                           "site.toml [plan] units (m, mm, cm, in, ft, ...)")
     return UNITS[code]
 
 
@@ -230,7 +231,11 @@ def _visit(r: _Reading, insert, parent, chain: tuple[str, ...], blocks: tuple[st
         _place(r, insert, matrix, chain, attrs, level or r.options.default_level, asset)
         return
     if not _holds_placements(r, block, insert.doc):
-        r.left_out[block] += 1
+        if attrs.get("tag"):
+            # a tagged INSERT is a piece of equipment: left out, it would be lost without a word
+            r.problem(_name(attrs["tag"], chain), _no_asset(r, block))
+        else:
+            r.left_out[block] += 1
         return
     if insert.mcount > 1:
         r.problem(_name(attrs.get("tag"), chain), f"array INSERT (MINSERT) of block {block!r}, which holds "
@@ -242,6 +247,18 @@ def _visit(r: _Reading, insert, parent, chain: tuple[str, ...], blocks: tuple[st
     for e in insert.block():
         if e.dxftype() == "INSERT":
             _visit(r, e, matrix, chain, (*blocks, block), level)
+
+
+def _no_asset(r: _Reading, block: str) -> str:
+    folder = f" (no sources/assets/{block}/)" if ASSET_ID.match(block) else ""
+    near = _near_asset(r, block)
+    return (f"block {block!r} is not an asset{folder} and site.toml [floorplan] blocks maps it to none"
+            + (f"; did you mean asset {near!r}?" if near else ""))
+
+
+def _near_asset(r: _Reading, block: str) -> str | None:
+    near = difflib.get_close_matches(block, sorted(r.known_assets or ()), n=1, cutoff=0.8)
+    return near[0] if near else None
 
 
 def _holds_placements(r: _Reading, block: str, doc) -> bool:
@@ -261,7 +278,7 @@ def _place(r: _Reading, insert, matrix, chain: tuple[str, ...], attrs: dict[str,
     where = _name(tag, chain)
     if r.known_assets is not None and asset not in r.known_assets:
         r.problem(where, f"block {block!r} is mapped to {asset!r}, which is not a known asset (no "
-                         f"sources/assets/{asset}/; see {r.options.site_toml} [floorplan] blocks)")
+                         f"sources/assets/{asset}/; see site.toml [floorplan] blocks)")
         return
     if insert.mcount > 1:
         r.problem(where, f"array INSERT (MINSERT) of block {block!r}: explode it into single INSERTs with their own tags")
@@ -280,7 +297,7 @@ def _place(r: _Reading, insert, matrix, chain: tuple[str, ...], attrs: dict[str,
         return
     if not level:
         r.problem(where, f"no {r.options.level_attribute} attribute on it or an INSERT around it, and no "
-                         f"[floorplan] default_level in {r.options.site_toml}")
+                         "[floorplan] default_level in site.toml")
         return
     if r.levels is not None and level not in r.levels:
         r.problem(where, f"{r.options.level_attribute} {level!r} is not a level of site.toml ({', '.join(sorted(r.levels))})")
@@ -349,19 +366,16 @@ def _warnings(r: _Reading, doc, platforms: list[ir.Platform], levels) -> list[st
     out = []
     if r.left_out:
         listed = ", ".join(f"{b} x{n}" for b, n in sorted(r.left_out.items(), key=lambda kv: (-kv[1], kv[0])))
-        hint = ""
-        if r.known_assets:
-            near = {b: difflib.get_close_matches(b, sorted(r.known_assets), n=1, cutoff=0.8) for b in r.left_out}
-            near = {b: m[0] for b, m in sorted(near.items()) if m}
-            hint = "".join(f"; did {b!r} mean asset {a!r}?" for b, a in near.items())
+        near = {b: _near_asset(r, b) for b in sorted(r.left_out)}
+        hint = "".join(f"; did {b!r} mean asset {a!r}?" for b, a in near.items() if a)
         out.append(f"{sum(r.left_out.values())} INSERTs of {len(r.left_out)} blocks place nothing and are left "
-                   f"out: {listed} (map a block to an asset in {r.options.site_toml} [floorplan] blocks to "
+                   f"out: {listed} (map a block to an asset in site.toml [floorplan] blocks to "
                    f"place it){hint}")
     if not r.placements:
         met = ", ".join(f"{b} x{n}" for b, n in sorted(r.inserts.items(), key=lambda kv: (-kv[1], kv[0])))
         out.append(f"no placements: {sum(r.inserts.values())} INSERTs of {len(r.inserts)} blocks"
                    + (f" ({met})" if met else "") + " and none of a block mapped to an asset "
-                   f"({r.options.site_toml} [floorplan] blocks) or named by one")
+                   "(site.toml [floorplan] blocks) or named by one")
     if not platforms:
         wanted = ", ".join(f"{PLATFORM_PREFIX}{lv}" for lv in sorted(levels)) if levels else f"{PLATFORM_PREFIX}<level>"
         closed = Counter(e.dxf.layer for e in doc.modelspace().query("LWPOLYLINE") if e.closed)
