@@ -1,7 +1,10 @@
 """The glTF scene: one .glb that reuses each model's meshes through
 EXT_mesh_gpu_instancing (a mesh is stored once however often it is placed; meshes with
 morph targets get a node per placement instead), MSFT_lod for the coarser levels, a
-KHR_lights_punctual sun, Y up, the geodetic origin in extras.
+KHR_lights_punctual sun, Y up, the geodetic origin in extras. A primitive's
+KHR_materials_variants mappings come along with their materials, the variants merged
+by name across models (a viewer switches a placement's state materials from the
+scene alone).
 
 It reads the built model .glb files (the packages are its input, not the IR).
 """
@@ -136,6 +139,7 @@ class SceneBuilder:
         self.used_ext: set[str] = set()
         self._mesh_cache: dict[tuple[str, int], int] = {}
         self._material_cache: dict[tuple[str, int], int] = {}
+        self.variants: list[str] = []  # KHR_materials_variants names, in order of first use
 
     def _append(self, data: bytes) -> int:
         self.bin += b"\0" * (-len(self.bin) % 4)
@@ -181,6 +185,9 @@ class SceneBuilder:
             if "targets" in p:
                 q["targets"] = [{a: self._copy_accessor(src, src_bin, i) for a, i in sorted(t.items())}
                                 for t in p["targets"]]
+            mappings = p.get("extensions", {}).get("KHR_materials_variants", {}).get("mappings")
+            if mappings:
+                q["extensions"] = {"KHR_materials_variants": {"mappings": self._copy_mappings(key, src, mappings)}}
             prims.append(q)
         new = {"name": mesh.get("name", ""), "primitives": prims}
         if "weights" in mesh:
@@ -190,6 +197,20 @@ class SceneBuilder:
         self.doc["meshes"].append(new)
         self._mesh_cache[ck] = len(self.doc["meshes"]) - 1
         return self._mesh_cache[ck]
+
+    def _copy_mappings(self, key: str, src: dict, mappings: list[dict]) -> list[dict]:
+        """A primitive's variant mappings with the scene's material and variant indices."""
+        names = [v["name"] for v in src.get("extensions", {}).get("KHR_materials_variants", {}).get("variants", [])]
+        out = []
+        for m in mappings:
+            variants = []
+            for i in m["variants"]:
+                if names[i] not in self.variants:
+                    self.variants.append(names[i])
+                variants.append(self.variants.index(names[i]))
+            out.append({"material": self._copy_material(key, src, m["material"]), "variants": variants})
+        self.used_ext.add("KHR_materials_variants")
+        return out
 
     def instance_accessors(self, transforms: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict[str, int]:
         """TRANSLATION / ROTATION / SCALE accessors of instance transforms (Y-up), from
@@ -331,6 +352,8 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
     q = matrix_to_quat(np.stack([x, y, z], axis=1))
     sb.doc["extensions"] = {"KHR_lights_punctual": {"lights": [
         {"name": "sun", "type": "directional", "color": [1.0, 0.96, 0.9], "intensity": float(sun["illuminance_lux"])}]}}
+    if sb.variants:
+        sb.doc["extensions"]["KHR_materials_variants"] = {"variants": [{"name": n} for n in sb.variants]}
     sb.add_node({"name": "sun", "rotation": [float(v) for v in q], "extensions": {"KHR_lights_punctual": {"light": 0}}})
     sb.used_ext.add("KHR_lights_punctual")
 
