@@ -13,6 +13,8 @@ Nothing here does I/O; arrays are never mutated after construction.
 
 from __future__ import annotations
 
+import hashlib
+
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Literal
@@ -117,6 +119,45 @@ class Phong:
     shininess: float
 
 
+TEXTURE_SLOTS = ("base_color", "normal", "metallic_roughness", "occlusion", "emissive")
+_IMAGE_MIME = {b"\x89PNG\r\n\x1a\n": ("image/png", ".png"), b"\xff\xd8\xff": ("image/jpeg", ".jpg")}
+
+
+@dataclass(frozen=True)
+class Texture:
+    """An image a material samples with its mesh's UVs (set 0, origin bottom-left as in
+    Blender and COLLADA; the glTF writer flips V).
+
+    name: a file-name stem, unique within the asset; data: the PNG or JPEG bytes as
+    found in the source (never re-encoded, so every output carries the same image).
+    metallic_roughness follows glTF: roughness in G, metalness in B.
+    """
+
+    name: str
+    data: bytes
+
+    @property
+    def mime(self) -> str:
+        return self._kind()[0]
+
+    @property
+    def suffix(self) -> str:
+        return self._kind()[1]
+
+    @cached_property
+    def digest(self) -> str:
+        return hashlib.sha256(self.data).hexdigest()
+
+    def _kind(self) -> tuple[str, str]:
+        for magic, kind in _IMAGE_MIME.items():
+            if self.data.startswith(magic):
+                return kind
+        raise ValueError(f"texture {self.name!r} is neither PNG nor JPEG")
+
+    def __repr__(self) -> str:
+        return f"Texture({self.name!r}, {len(self.data)} bytes, sha256 {self.digest[:12]})"
+
+
 @dataclass(frozen=True)
 class Material:
     """A Principled-BSDF / glTF metallic-roughness material. Colours are linear RGB.
@@ -130,6 +171,22 @@ class Material:
     metallic: float = 0.0
     roughness: float = 0.5
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    # image maps (TEXTURE_SLOTS), each multiplied by the factor above as in glTF
+    base_color_texture: Texture | None = None
+    normal_texture: Texture | None = None
+    metallic_roughness_texture: Texture | None = None
+    occlusion_texture: Texture | None = None
+    emissive_texture: Texture | None = None
+
+    def textures(self) -> dict[str, Texture]:
+        """slot -> texture, for the slots this material fills."""
+        return {slot: t for slot in TEXTURE_SLOTS if (t := getattr(self, f"{slot}_texture")) is not None}
+
+    def key(self) -> dict:
+        """Everything the material is, as JSON-able data (textures by name and hash)."""
+        data = {k: getattr(self, k) for k in ("name", "base_color", "metallic", "roughness", "emission")}
+        data["textures"] = {slot: [t.name, t.digest] for slot, t in self.textures().items()}
+        return data
 
     @property
     def alpha(self) -> float:
@@ -351,6 +408,15 @@ class Asset:
         for link in self.links:
             for v in link.visuals:
                 yield link, v
+
+    def textures(self) -> dict[str, Texture]:
+        """name -> texture over every material, by name (a reader gives one name one image)."""
+        out: dict[str, Texture] = {}
+        for m in self.materials:
+            for t in m.textures().values():
+                if out.setdefault(t.name, t).digest != t.digest:
+                    raise ValueError(f"two different images named {t.name!r}")
+        return dict(sorted(out.items()))
 
     def triangle_count(self, lod: int = 0) -> int:
         return sum(v.lod(lod).triangle_count for _, v in self.visuals())

@@ -15,8 +15,9 @@ WRITERS = {
     "usd": "usd",
     "gltf": "gltf",
     "thumbnail": "thumbnail",
+    "textures": "textures",
 }
-PACKAGE_FORMATS = ("collada", "sdf", "usd", "gltf", "thumbnail")
+PACKAGE_FORMATS = ("textures", "collada", "sdf", "usd", "gltf", "thumbnail")
 
 
 def writer(fmt: str):

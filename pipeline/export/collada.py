@@ -6,7 +6,6 @@ collision) frame, because the SDF <visual><pose> places it. Metres, Z up.
 
 from __future__ import annotations
 
-import dataclasses
 import datetime
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from pipeline import ir
 from pipeline.digest import sha256_json
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.export.textures import texture_file
 from pipeline.export.variants import variant_collisions, variant_visuals
 from pipeline.geometry.metrics import stored_normals
 
@@ -35,6 +35,8 @@ _TOOL = "substation-twin"
 _FLOAT_TAGS = ("color", "float", "matrix")
 # The symbol a mesh's <triangles> name and its node binds to the material.
 _MATERIAL_SYMBOL = "material0"
+# The texture coordinate set a sampler reads, bound to TEXCOORD set 0.
+_UV_SET = "UVSET0"
 
 
 def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
@@ -83,7 +85,7 @@ def _write_document(path: Path, node_name: str, mesh: ir.Mesh, material: ir.Mate
                     made: dict[str, bytes], memo) -> None:
     """path <- the document of one mesh, taken from `made` or `memo` when it was made
     before (keyed by everything _dae_bytes reads)."""
-    key = sha256_json([node_name, None if material is None else dataclasses.asdict(material), mesh.digest])
+    key = sha256_json([node_name, None if material is None else material.key(), mesh.digest])
     path.parent.mkdir(parents=True, exist_ok=True)
     if memo is not None and memo.link(key, path):
         return
@@ -137,7 +139,8 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
     bindings = []
     if material is not None:
         mat = _phong_material(doc, material)
-        bindings.append(dae_scene.MaterialNode(_MATERIAL_SYMBOL, mat, inputs=[]))
+        uv_binding = [(_UV_SET, "TEXCOORD", "0")] if material.base_color_texture is not None else []
+        bindings.append(dae_scene.MaterialNode(_MATERIAL_SYMBOL, mat, inputs=uv_binding))
     node = dae_scene.Node(ident, children=[dae_scene.GeometryNode(geom, bindings)], name=ident)
     scene = dae_scene.Scene("Scene", [node])
     doc.scenes.append(scene)
@@ -185,9 +188,20 @@ def _phong_material(doc, material: ir.Material):
     # `opaque` attribute; the diffuse alpha stays 1 (gz-rendering multiplies the two)
     p = material.phong()
     ident = names.safe_name(material.name)
+    params, diffuse = [], p.diffuse
+    base = material.base_color_texture
+    if base is not None:
+        # <diffuse><texture> through a sampler and a surface to the package's image,
+        # relative to this file (meshes/ -> ../textures/); a diffuse is a colour or a
+        # texture, so the base colour factor is left to the SDF <material>
+        image = dae_material.CImage(f"{names.safe_name(base.name)}-image", f"../{texture_file(base)}")
+        surface = dae_material.Surface(f"{ident}-surface", image)
+        sampler = dae_material.Sampler2D(f"{ident}-sampler", surface)
+        doc.images.append(image)
+        params, diffuse = [surface, sampler], dae_material.Map(sampler, _UV_SET)
     effect = dae_material.Effect(
-        f"{ident}-effect", [], "phong",
-        emission=p.emissive, ambient=p.ambient, diffuse=p.diffuse, specular=p.specular,
+        f"{ident}-effect", params, "phong",
+        emission=p.emissive, ambient=p.ambient, diffuse=diffuse, specular=p.specular,
         shininess=p.shininess, transparency=material.alpha,
     )
     mat = dae_material.Material(f"{ident}-material", ident, effect)

@@ -71,6 +71,22 @@ class _Doc:
         self.views: list[dict] = []
         self.blob = bytearray()
         self.extensions: set[str] = set()
+        self.images: list[dict] = []
+        self.textures: list[dict] = []
+        self.texture_index: dict[str, int] = {}  # texture name -> index in textures
+
+    def add_texture(self, texture: ir.Texture) -> int:
+        """The texture's index; its image embedded once in the buffer however many
+        materials sample it."""
+        if texture.name not in self.texture_index:
+            self.blob += b"\0" * (-len(self.blob) % 4)
+            self.views.append({"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(texture.data)})
+            self.blob += texture.data
+            self.images.append({"bufferView": len(self.views) - 1, "mimeType": texture.mime, "name": texture.name})
+            # one sampler for all: trilinear, repeat (glTF's defaults spelled out)
+            self.textures.append({"sampler": 0, "source": len(self.images) - 1})
+            self.texture_index[texture.name] = len(self.textures) - 1
+        return self.texture_index[texture.name]
 
     def add_node(self, node: dict) -> int:
         self.nodes.append(node)
@@ -110,9 +126,12 @@ def _glb_bytes(asset: ir.Asset) -> bytes:
     if variants:
         doc.json["extensions"] = {"KHR_materials_variants": {"variants": [{"name": n} for n in variants]}}
         doc.extensions.add("KHR_materials_variants")
-    for key, items in (("meshes", doc.meshes), ("accessors", doc.accessors), ("bufferViews", doc.views)):
+    for key, items in (("meshes", doc.meshes), ("accessors", doc.accessors), ("bufferViews", doc.views),
+                       ("images", doc.images), ("textures", doc.textures)):
         if items:
             doc.json[key] = items
+    if doc.textures:
+        doc.json["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}]
     if not doc.json["materials"]:
         del doc.json["materials"]
     if doc.blob:
@@ -306,7 +325,23 @@ def _material(doc: _Doc, m: ir.Material) -> dict:
         out["emissiveFactor"] = emission
     if a < 1.0:
         out["alphaMode"] = "BLEND"
+    _texture_slots(doc, m, out)
     return out
+
+
+# IR slot -> where glTF puts it: (parent key or None for the material itself, key)
+_SLOTS = {"base_color": ("pbrMetallicRoughness", "baseColorTexture"),
+          "metallic_roughness": ("pbrMetallicRoughness", "metallicRoughnessTexture"),
+          "normal": (None, "normalTexture"), "occlusion": (None, "occlusionTexture"),
+          "emissive": (None, "emissiveTexture")}
+
+
+def _texture_slots(doc: _Doc, m: ir.Material, out: dict) -> None:
+    for slot, texture in m.textures().items():
+        parent, key = _SLOTS[slot]
+        (out[parent] if parent else out)[key] = {"index": doc.add_texture(texture), "texCoord": 0}
+    if "emissive" in m.textures() and "emissiveFactor" not in out:
+        out["emissiveFactor"] = [1.0, 1.0, 1.0]  # the map alone: glTF's default factor is black
 
 
 def _variants(asset: ir.Asset) -> list[str]:

@@ -10,6 +10,7 @@ import numpy as np
 
 from .. import ir
 from . import names
+from .textures import texture_file
 
 MANIFEST = "manifest.json"
 FORMAT_VERSION = 1
@@ -86,7 +87,9 @@ def content(asset: ir.Asset, *, source: dict, outputs: dict[str, str], lod_model
         ],
         "materials": [
             {"name": m.name, "base_color": list(m.base_color), "metallic": m.metallic,
-             "roughness": m.roughness, "emission": list(m.emission)}
+             "roughness": m.roughness, "emission": list(m.emission),
+             **({"textures": {slot: {"file": texture_file(t), "sha256": t.digest} for slot, t in m.textures().items()}}
+                if m.textures() else {})}
             for m in asset.materials
         ],
         "bindings": bindings,

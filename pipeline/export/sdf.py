@@ -21,6 +21,7 @@ from lxml import etree
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.export.textures import texture_file
 from pipeline.export.variants import VariantVisual, variant_collisions, variant_visuals
 from pipeline.geometry.primitives import Primitive
 from pipeline.geometry.transform import matrix_to_xyz_rpy
@@ -178,12 +179,21 @@ def _material(visual_el, asset: ir.Asset, visual_name: str, material_name: str) 
     except KeyError:
         raise UserError(asset.source or asset.id, visual_name,
                         f"material {material_name!r} is not among the asset's materials") from None
-    material_element(visual_el, mat)
+    material_element(visual_el, mat, asset.id)
 
 
-def material_element(visual_el, mat: ir.Material) -> None:
+# IR texture slot -> sdformat's <pbr><metal> map. The packed glTF metallic-roughness
+# image has no place: gz-rendering samples roughness_map and metalness_map from their
+# red channel, where glTF keeps neither.
+_PBR_MAPS = {"base_color": "albedo_map", "normal": "normal_map", "occlusion": "ambient_occlusion_map",
+             "emissive": "emissive_map"}
+
+
+def material_element(visual_el, mat: ir.Material, asset_id: str | None = None) -> None:
     """visual_el's <material> (replacing any) and <transparency>, from the Principled
-    inputs through ir.Material.sdf_phong (its docstring gives the mapping)."""
+    inputs through ir.Material.sdf_phong (its docstring gives the mapping); with the
+    package's asset id, its image maps as model://<asset_id>/textures/... (gz-sim
+    replaces a mesh's own materials by this one, textures included)."""
     for old in visual_el.findall("material") + visual_el.findall("transparency"):
         visual_el.remove(old)
     p = mat.sdf_phong()
@@ -194,6 +204,10 @@ def material_element(visual_el, mat: ir.Material) -> None:
     metal = _sub(_sub(el, "pbr"), "metal")
     _sub(metal, "metalness", names.fmt(mat.metallic))
     _sub(metal, "roughness", names.fmt(mat.roughness))
+    if asset_id is not None:
+        for slot, texture in mat.textures().items():
+            if slot in _PBR_MAPS:
+                _sub(metal, _PBR_MAPS[slot], f"model://{asset_id}/{texture_file(texture)}")
     if mat.alpha < 1.0:
         # Both generations read the visual's <transparency>, not the colour alpha.
         _sub(visual_el, "transparency", names.fmt(1.0 - mat.alpha))

@@ -33,6 +33,7 @@ import numpy as np
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import names
+from pipeline.export.textures import texture_file
 from pipeline.geometry.metrics import stored_normals
 from pipeline.geometry.transform import compose, quaternion_from_matrix
 
@@ -152,10 +153,56 @@ def _author_materials(p, stage, root_path, asset: ir.Asset) -> dict[str, object]
         shader.CreateInput("roughness", flt).Set(float(m.roughness))
         shader.CreateInput("emissiveColor", vec3).Set(p.Gf.Vec3f(*(float(c) for c in m.emission)))
         shader.CreateInput("opacity", flt).Set(a)
+        _author_textures(p, stage, path, shader, m)
         mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
         mat.GetPrim().SetCustomDataByKey("ir:name", m.name)
         out[m.name] = mat
     return out
+
+
+# IR slot -> (UsdPreviewSurface input, the texture output it reads, colour space)
+_TEXTURE_INPUTS = {"base_color": ("diffuseColor", "rgb", "sRGB"), "emissive": ("emissiveColor", "rgb", "sRGB"),
+                   "normal": ("normal", "rgb", "raw"), "occlusion": ("occlusion", "r", "raw")}
+
+
+def _author_textures(p, stage, path, surface, m: ir.Material) -> None:
+    """A UsdUVTexture per image map of `m`, reading the mesh's `st` primvar and the
+    package's image (./textures/..., beside this layer). The factors multiply the image
+    through the texture's `scale`, as glTF's factors do; glTF's packed
+    metallic-roughness image feeds roughness from G and metallic from B."""
+    textures = m.textures()
+    if not textures:
+        return
+    reader = p.UsdShade.Shader.Define(stage, path.AppendChild("stReader"))
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", p.Sdf.ValueTypeNames.String).Set("st")
+    st = reader.CreateOutput("result", p.Sdf.ValueTypeNames.Float2)
+    flt3, flt = p.Sdf.ValueTypeNames.Float3, p.Sdf.ValueTypeNames.Float
+    r, g, b, a = (float(c) for c in m.base_color)
+    factors = {"base_color": (r, g, b, a), "emissive": (*(float(c) for c in m.emission), 1.0),
+               "normal": (2.0, 2.0, 2.0, 1.0), "occlusion": (1.0, 1.0, 1.0, 1.0),
+               "metallic_roughness": (1.0, float(m.roughness), float(m.metallic), 1.0)}
+    for slot, texture in textures.items():
+        node = p.UsdShade.Shader.Define(stage, path.AppendChild(f"{slot}_texture"))
+        node.CreateIdAttr("UsdUVTexture")
+        node.CreateInput("file", p.Sdf.ValueTypeNames.Asset).Set(f"./{texture_file(texture)}")
+        node.CreateInput("st", p.Sdf.ValueTypeNames.Float2).ConnectToSource(st)
+        for wrap in ("wrapS", "wrapT"):
+            node.CreateInput(wrap, p.Sdf.ValueTypeNames.Token).Set("repeat")
+        node.CreateInput("scale", p.Sdf.ValueTypeNames.Float4).Set(p.Gf.Vec4f(*factors[slot]))
+        if slot == "normal":
+            node.CreateInput("bias", p.Sdf.ValueTypeNames.Float4).Set(p.Gf.Vec4f(-1.0, -1.0, -1.0, 0.0))
+        if slot == "metallic_roughness":
+            node.CreateInput("sourceColorSpace", p.Sdf.ValueTypeNames.Token).Set("raw")
+            surface.CreateInput("roughness", flt).ConnectToSource(node.CreateOutput("g", flt))
+            surface.CreateInput("metallic", flt).ConnectToSource(node.CreateOutput("b", flt))
+            continue
+        target, output, space = _TEXTURE_INPUTS[slot]
+        node.CreateInput("sourceColorSpace", p.Sdf.ValueTypeNames.Token).Set(space)
+        kind = flt3 if output == "rgb" else flt
+        value_type = p.Sdf.ValueTypeNames.Color3f if target in ("diffuseColor", "emissiveColor") else (
+            p.Sdf.ValueTypeNames.Normal3f if target == "normal" else flt)
+        surface.CreateInput(target, value_type).ConnectToSource(node.CreateOutput(output, kind))
 
 
 def _bind(p, mesh_prim, material) -> None:

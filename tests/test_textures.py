@@ -1,0 +1,122 @@
+"""Image textures through every writer, read back by the formats' own consumers: the
+Khronos glTF validator, OpenUSD (UsdValidation and the shader network's file paths),
+pycollada's schema, Gazebo's mesh loader (tools/gzprobe) and libsdformat."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+from PIL import Image
+
+from fixtures_assets import box_mesh
+from pipeline import ir
+from pipeline.export import names
+from pipeline.export.package import write_package
+from pipeline.export.textures import texture_file
+from pipeline.validate import external, gazebo
+
+SAFE = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
+
+
+def _image(fmt: str, size=(8, 4), seed=0) -> bytes:
+    rng = np.random.default_rng(seed)
+    buf = io.BytesIO()
+    Image.fromarray(rng.integers(0, 255, (size[1], size[0], 3), dtype=np.uint8)).save(buf, fmt)
+    return buf.getvalue()
+
+
+def _textured_asset() -> ir.Asset:
+    albedo = ir.Texture("panel_albedo", _image("PNG"))
+    normal = ir.Texture("panel_normal", _image("PNG", seed=1))
+    orm = ir.Texture("panel_orm", _image("JPEG", seed=2))
+    painted = ir.Material("painted", base_color=(0.9, 0.8, 0.7, 1.0), metallic=0.2, roughness=0.6,
+                          base_color_texture=albedo, normal_texture=normal, metallic_roughness_texture=orm,
+                          occlusion_texture=orm)
+    plain = ir.Material("plain", base_color=(0.3, 0.3, 0.3, 1.0))
+    link = ir.Link("base", visuals=(ir.Visual("panel", "painted", (box_mesh((1, 0.2, 2), (0, 0, 1), attributes=True),)),
+                                    ir.Visual("frame", "plain", (box_mesh((1.2, 0.3, 0.1)),))))
+    return ir.Asset("cabinet", "control", (link,), materials=(painted, plain))
+
+
+@pytest.fixture(scope="module")
+def package(tmp_path_factory):
+    models = tmp_path_factory.mktemp("models")
+    asset = _textured_asset()
+    write_package(asset, models)
+    return asset, models / asset.id
+
+
+def test_images_are_written_once_as_found(package):
+    asset, folder = package
+    for texture in asset.textures().values():
+        assert (folder / texture_file(texture)).read_bytes() == texture.data
+    assert sorted(p.name for p in (folder / "textures").iterdir()) == ["panel_albedo.png", "panel_normal.png",
+                                                                        "panel_orm.jpg"]
+
+
+def test_gltf_embeds_the_images_and_the_validator_accepts_them(package):
+    asset, folder = package
+    path = folder / names.gltf_file(asset.id)
+    (result,) = external.gltf_validator([path])
+    assert result.status == "passed", result.messages
+    data = path.read_bytes()
+    json_len = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + json_len])
+    blob = data[20 + json_len + 8:]
+    images = {img["name"]: img for img in doc["images"]}
+    assert len(images) == 3 and images["panel_orm"]["mimeType"] == "image/jpeg"
+    for texture in asset.textures().values():
+        view = doc["bufferViews"][images[texture.name]["bufferView"]]
+        assert blob[view["byteOffset"]:view["byteOffset"] + view["byteLength"]] == texture.data
+    painted = next(m for m in doc["materials"] if m["name"] == "painted")
+    pbr = painted["pbrMetallicRoughness"]
+    source = lambda ref: doc["images"][doc["textures"][ref["index"]]["source"]]["name"]  # noqa: E731
+    assert source(pbr["baseColorTexture"]) == "panel_albedo"
+    assert source(pbr["metallicRoughnessTexture"]) == source(painted["occlusionTexture"]) == "panel_orm"
+    assert source(painted["normalTexture"]) == "panel_normal"
+    assert "baseColorTexture" not in next(m for m in doc["materials"] if m["name"] == "plain")["pbrMetallicRoughness"]
+
+
+def test_usd_shaders_read_the_package_images(package):
+    from pxr import Sdf, Usd, UsdShade
+
+    asset, folder = package
+    path = folder / names.usd_file(asset.id)
+    assert external.usd_validation(path).status == "passed"
+    stage = Usd.Stage.Open(str(path))
+    files = {}
+    for prim in stage.Traverse():
+        shader = UsdShade.Shader(prim)
+        if shader and shader.GetIdAttr().Get() == "UsdUVTexture":
+            asset_path = shader.GetInput("file").Get()
+            files[prim.GetName()] = Path(Sdf.ComputeAssetPathRelativeToLayer(stage.GetRootLayer(), asset_path.path))
+    assert set(files) == {"base_color_texture", "normal_texture", "metallic_roughness_texture", "occlusion_texture"}
+    assert all(f.is_file() for f in files.values())
+    surface = UsdShade.Shader(stage.GetPrimAtPath(f"/{asset.id}/Looks/painted/PreviewSurface"))
+    (source,) = surface.GetInput("diffuseColor").GetConnectedSources()[0]
+    assert source.source.GetPath().name == "base_color_texture"
+
+
+def test_collada_and_sdf_point_gazebo_at_the_image(package):
+    asset, folder = package
+    dae = folder / names.mesh_file("base", "panel", 0)
+    assert external.collada_schema(dae).status == "passed"
+    if not gazebo.available() and not os.environ.get("CI"):
+        pytest.skip(gazebo.PROBE_HINT)
+    report = gazebo.probe_meshes([dae])[str(dae)]
+    (material,) = report["materials"]
+    assert Path(material["texture"]).resolve() == (folder / "textures" / "panel_albedo.png").resolve()
+    assert report["uvs"] == 36 and gazebo.compare_mesh("panel", gazebo.written_summary(dae), report) == []
+    model = etree.parse(str(folder / "model.sdf"), SAFE).getroot()
+    metal = model.find(".//visual[@name='panel']/material/pbr/metal")
+    assert metal.findtext("albedo_map") == f"model://{asset.id}/textures/panel_albedo.png"
+    assert metal.findtext("normal_map") == f"model://{asset.id}/textures/panel_normal.png"
+    result = external.ign_sdf(folder / "model.sdf", [folder.parent])
+    assert result.status == "passed", result.messages
