@@ -29,10 +29,11 @@ BAD = _load(DATA / "bad" / "assets.py", "bad_assets")
 CLEAN = _load(DATA / "clean" / "assets.py", "clean_assets")
 PKG_CODES = sorted(p.name for p in (DATA / "bad").glob("PKG*"))
 PLACE_CODES = sorted(p.name for p in (DATA / "bad").glob("PLACE*"))
+GZ_CODES = sorted(_load(Path(__file__).with_name("test_gazebo_rules.py"), "gazebo_rules").FIXTURES)
 
 
 def test_every_rule_has_exactly_one_bad_fixture():
-    fixtures = sorted([*BAD.FIXTURES, *PKG_CODES, *PLACE_CODES])
+    fixtures = sorted([*BAD.FIXTURES, *PKG_CODES, *PLACE_CODES, *GZ_CODES])
     assert fixtures == sorted(RULES)
 
 
@@ -40,7 +41,7 @@ def test_rule_table_is_well_formed():
     for code, (severity, group, description) in RULES.items():
         assert severity in ("error", "warning", "info")
         assert code.startswith({"geometry": "GEOM", "hierarchy": "HIER", "placement": "PLACE",
-                                "package": "PKG"}[group])
+                                "package": "PKG", "gazebo": "GZ"}[group])
         assert description
     assert finding("GEOM003", "a/b/c", "x") == Finding("GEOM003", "warning", "a/b/c", "x")
 

@@ -234,6 +234,14 @@ def world_findings(site: str, figures: dict) -> list[Finding]:
     return out
 
 
+def physics_findings(site: str, physics: dict) -> list[Finding]:
+    """dartsim's verdict on the world: every shape built, the world stepped."""
+    if not physics or (physics.get("ok") and not physics.get("failed_shapes")):
+        return []
+    why = physics.get("error") or f"{physics.get('failed_shapes')} shapes failed"
+    return [finding("GZ011", site, f"dartsim could not build the world as gz-sim would: {why}")]
+
+
 def mesh_findings(paths: list[Path], reports: dict[str, dict], site_of) -> list[Finding]:
     """Compare each written mesh with the probe's report of it; site_of(path) -> site."""
     out = []
@@ -335,9 +343,7 @@ def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path
             for use in model["meshes"]:
                 if not use["path"]:
                     scene.append(finding("GZ009", f"{world.name}/{model['name']}", f"{use['uri']} does not resolve"))
-        physics = seen.get("physics", {})
-        if physics and (not physics.get("ok") or physics.get("failed_shapes")):
-            scene.append(finding("GZ011", world.name, f"dartsim could not build the world: {physics}"))
+        scene += physics_findings(world.name, seen.get("physics", {}))
     return BuildCheck(found, scene, world_counts, figures)
 
 

@@ -249,7 +249,7 @@ def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
 
     for a in assets:
         a["external"] = _ext_rows(out, a.pop("_files"), results)
-        a["findings"] = _sort_rows(a["findings"] + [_finding_row("gazebo", f) for f in probed.assets.get(a["id"], [])])
+        a["findings"] = _sort_rows(a["findings"] + [_finding_row("package", f) for f in probed.assets.get(a["id"], [])])
     scene_rows = []
     for d in (placements or {}).get("findings", []):
         try:
@@ -261,7 +261,7 @@ def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
         "present": placements is not None,
         "placements": len((placements or {}).get("placements", [])),
         "lod_histogram": {str(k): int(v) for k, v in sorted((placements or {}).get("lod_histogram", {}).items())},
-        "findings": _sort_rows(scene_rows + [_finding_row("gazebo", f) for f in probed.scene]),
+        "findings": _sort_rows(scene_rows + [_finding_row("scene", f) for f in probed.scene]),
         "external": _ext_rows(out, [p for p in scene_files.values() if p is not None], results),
         "gazebo": probed.world,
     }

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -71,7 +72,9 @@ def main() -> None:
 
     f = pkg("PKG003")  # URIs that leave the package: another model, and ..
     _edit(f, "model.sdf", f"model://crate/{MESH}", "model://other/meshes/x.dae")
-    _edit(f, "model.sdf", "model://crate/meshes/body__hull__collision.dae", "../../../etc/hostname")
+    # the crate's hull is a box, written as a <box>: make it a mesh that points out
+    box = re.search(r"<box>.*?</box>", (f / "model.sdf").read_text(), re.S).group(0)
+    _edit(f, "model.sdf", box, "<mesh><uri>../../../etc/hostname</uri></mesh>")
     _rehash(f)
 
     f = pkg("PKG004")  # the mesh changed after the manifest was written
