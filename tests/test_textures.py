@@ -120,3 +120,29 @@ def test_collada_and_sdf_point_gazebo_at_the_image(package):
     assert metal.findtext("normal_map") == f"model://{asset.id}/textures/panel_normal.png"
     result = external.ign_sdf(folder / "model.sdf", [folder.parent])
     assert result.status == "passed", result.messages
+
+
+def test_the_thumbnail_shows_the_texture():
+    """A plain white material with a half red, half blue image: the thumbnail has both
+    colours where the untextured twin is one grey."""
+    from pipeline.export import thumbnail
+
+    pixels = np.zeros((8, 8, 3), dtype=np.uint8)
+    pixels[:, :4] = (230, 20, 20)
+    pixels[:, 4:] = (20, 20, 230)
+    buf = io.BytesIO()
+    Image.fromarray(pixels).save(buf, "PNG")
+    split = ir.Texture("split", buf.getvalue())
+    mesh = box_mesh((1, 1, 1), attributes=True)
+
+    def image(texture):
+        material = ir.Material("m", base_color=(1.0, 1.0, 1.0, 1.0), base_color_texture=texture)
+        asset = ir.Asset("t", "x", (ir.Link("l", visuals=(ir.Visual("v", "m", (mesh,)),)),), materials=(material,))
+        drawn = thumbnail.render(asset, 64).reshape(-1, 3).astype(int)
+        return drawn[(drawn != 255).any(axis=1)]
+
+    textured, plain = image(split), image(None)
+    reddish = (textured[:, 0] > textured[:, 2] + 60).mean()
+    bluish = (textured[:, 2] > textured[:, 0] + 60).mean()
+    assert reddish > 0.2 and bluish > 0.2, (reddish, bluish)
+    assert np.abs(plain[:, 0] - plain[:, 2]).max() < 5

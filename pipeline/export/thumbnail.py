@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import io
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -54,11 +55,11 @@ def write(asset: ir.Asset, folder: Path, size: int = 256) -> list[str]:
 
 def render(asset: ir.Asset, size: int = 256) -> np.ndarray:
     """(size, size, 3) uint8 sRGB image of the asset."""
-    triangles, colors = scene_triangles(asset)
+    triangles, colors, texturing = scene_triangles(asset)
     # Supersample (anti-alias) unless the drawn mesh is still heavy: then its pixels
     # are mostly sub-triangle detail anyway, and 4x the samples would cost ~4x.
     ss = SUPERSAMPLE if len(triangles) <= MAX_SUPERSAMPLED else 1
-    linear = rasterise(triangles, colors, size * ss, view_basis())
+    linear = rasterise(triangles, colors, size * ss, view_basis(), texturing)
     # Box-filter the supersampled image, then encode sRGB.
     linear = linear.reshape(size, ss, size, ss, 3).mean(axis=(1, 3))
     return _to_srgb8(linear)
@@ -73,15 +74,28 @@ def view_basis() -> np.ndarray:
     return np.stack([right, up, toward])
 
 
-def scene_triangles(asset: ir.Asset) -> tuple[np.ndarray, np.ndarray]:
-    """All drawn triangles in the model frame and their linear RGB colours.
+@dataclass(frozen=True)
+class Texturing:
+    """Base-colour images of the drawn triangles: uvs (m, 3, 2) per corner (NaN where a
+    triangle has none), image (m,) index into images or -1, images: linear RGB
+    (h, w, 3) float arrays, each already multiplied by its material's base colour."""
 
-    Returns triangles: (m, 3, 3) float64, colors: (m, 3) float64."""
+    uvs: np.ndarray
+    image: np.ndarray
+    images: tuple[np.ndarray, ...]
+
+
+def scene_triangles(asset: ir.Asset) -> tuple[np.ndarray, np.ndarray, Texturing]:
+    """All drawn triangles in the model frame, their linear RGB colours and textures.
+
+    Returns triangles: (m, 3, 3) float64, colors: (m, 3) float64, and the Texturing."""
     level = 0
     if asset.triangle_count(0) > MAX_TRIANGLES:
         level = asset.lod_count - 1
     materials = {m.name: m for m in asset.materials}
-    tris, cols = [], []
+    tris, cols, uvs, which = [], [], [], []
+    images: dict[str, int] = {}
+    decoded: list[np.ndarray] = []
     for link, visual in asset.visuals():
         mat = materials.get(visual.material, ir.Material(visual.material))
         if mat.alpha < MIN_ALPHA:
@@ -94,17 +108,62 @@ def scene_triangles(asset: ir.Asset) -> tuple[np.ndarray, np.ndarray]:
         tris.append(v[mesh.faces])
         color = np.clip(np.array(mat.base_color[:3]) + np.array(mat.emission), 0.0, 1.0)
         cols.append(np.broadcast_to(color, (mesh.triangle_count, 3)))
+        texture = mat.base_color_texture
+        if texture is not None and mesh.uvs is not None:
+            key = f"{texture.digest}:{color.tolist()}"
+            if key not in images:
+                images[key] = len(decoded)
+                decoded.append(_linear_image(texture.data) * color)
+            uvs.append(mesh.uvs[mesh.faces])
+            which.append(np.full(mesh.triangle_count, images[key]))
+        else:
+            uvs.append(np.full((mesh.triangle_count, 3, 2), np.nan))
+            which.append(np.full(mesh.triangle_count, -1))
     if not tris:
-        return np.zeros((0, 3, 3)), np.zeros((0, 3))
-    return np.concatenate(tris), np.concatenate(cols)
+        return np.zeros((0, 3, 3)), np.zeros((0, 3)), Texturing(np.zeros((0, 3, 2)), np.zeros(0, int), ())
+    return (np.concatenate(tris), np.concatenate(cols),
+            Texturing(np.concatenate(uvs), np.concatenate(which), tuple(decoded)))
 
 
-def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.ndarray) -> np.ndarray:
+def _linear_image(data: bytes) -> np.ndarray:
+    """(h, w, 3) linear RGB of a PNG or JPEG (sRGB encoded, as base colour maps are)."""
+    from PIL import Image
+
+    srgb = np.asarray(Image.open(io.BytesIO(data)).convert("RGB"), dtype=np.float64) / 255.0
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+
+
+def _texels(texturing: Texturing, tri: np.ndarray, px: np.ndarray, py: np.ndarray,
+            corners_x: tuple, corners_y: tuple) -> np.ndarray:
+    """Linear RGB of each pixel (px, py: pixel centres) drawn by a textured triangle
+    `tri`: its UVs interpolated with the pixel's barycentric weights, the nearest texel
+    (UV origin bottom-left, repeating)."""
+    x0, x1, x2 = (c[tri] for c in corners_x)
+    y0, y1, y2 = (c[tri] for c in corners_y)
+    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+    w1 = ((px - x0) * (y2 - y0) - (x2 - x0) * (py - y0)) / area
+    w2 = ((x1 - x0) * (py - y0) - (px - x0) * (y1 - y0)) / area
+    w = np.stack([1.0 - w1 - w2, w1, w2], axis=1)
+    uv = np.einsum("kc,kcj->kj", w, texturing.uvs[tri])
+    out = np.empty((len(tri), 3))
+    for index, image in enumerate(texturing.images):
+        mine = texturing.image[tri] == index
+        h, wd = image.shape[:2]
+        col = np.floor(np.mod(uv[mine, 0], 1.0) * wd).astype(np.int64).clip(0, wd - 1)
+        row = np.floor((1.0 - np.mod(uv[mine, 1], 1.0)) * h).astype(np.int64).clip(0, h - 1)
+        out[mine] = image[row, col]
+    return out
+
+
+def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.ndarray,
+              texturing: Texturing | None = None) -> np.ndarray:
     """Z-buffered, flat Lambert-shaded orthographic render.
 
     triangles: (m, 3, 3) float64 model frame; colors: (m, 3) linear RGB;
-    basis: (3, 3) from view_basis(). Returns (size, size, 3) float64 linear RGB, white
-    where nothing is drawn. The view is fitted to the triangles' projected extent."""
+    basis: (3, 3) from view_basis(); texturing: base-colour images of the triangles
+    that have one (their pixels take the texel instead of the flat colour). Returns
+    (size, size, 3) float64 linear RGB, white where nothing is drawn. The view is
+    fitted to the triangles' projected extent."""
     image = np.ones((size, size, 3))
     if len(triangles) == 0:
         return image
@@ -159,6 +218,12 @@ def rasterise(triangles: np.ndarray, colors: np.ndarray, size: int, basis: np.nd
     drawn = best_tri >= 0
     flat = image.reshape(-1, 3)
     flat[drawn] = tri_color[best_tri[drawn]]
+    if texturing is not None and texturing.images:
+        pixels = np.flatnonzero(drawn)
+        pixels = pixels[texturing.image[best_tri[pixels]] >= 0]
+        tri = best_tri[pixels]
+        texel = _texels(texturing, tri, pixels % size + 0.5, pixels // size + 0.5, (x0, x1, x2), (y0, y1, y2))
+        flat[pixels] = texel * shade[tri, None]
     return image
 
 
