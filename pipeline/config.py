@@ -409,3 +409,11 @@ def load_assets(sources: Path, passed: PassedChecks | None = None) -> tuple[dict
             continue
         configs[cfg.id] = cfg
     return configs, problems
+
+
+def asset_ids(sources: Path) -> set[str]:
+    """The id of every sources/assets/<id>/ that holds an asset.toml, readable or not:
+    what a floor plan may place. An asset whose asset.toml is broken fails its own
+    build; the plan still reads the same (and the planner and the scene tasks share
+    one floor-plan memo entry)."""
+    return {toml.parent.name for toml in (Path(sources) / "assets").glob("*/asset.toml")}

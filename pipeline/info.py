@@ -41,10 +41,16 @@ def _triangles(cfg: config.AssetConfig, build: Path) -> int | None:
 
 
 def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
+    """Every problem of the sources, each file on its own: a broken site.toml still
+    lets the assets be checked, a broken asset the others and the floor plan."""
     sources = Path(sources)
     r = InfoReport(sources=sources)
-    site = config.load_site(sources / "site.toml")  # without a site nothing else means anything
-    r.site = site.name
+    try:
+        site = config.load_site(sources / "site.toml")
+        r.site = site.name
+    except UserError as e:
+        site = None
+        r.problems.append(str(e))
     assets, problems = config.load_assets(sources)
     r.problems.extend(str(p) for p in problems)
     for asset_id, cfg in sorted(assets.items()):
@@ -53,11 +59,20 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
             entry["triangles"] = _triangles(cfg, build)
         except UserError as e:
             r.problems.append(str(e))
+        except MemoryError:
+            r.problems.append(f"{cfg.source}: ran out of memory reading it")
+        except Exception as e:  # noqa: BLE001 - a reader's bug on this file hides no other problem
+            r.problems.append(f"{cfg.source}: cannot be read ({type(e).__name__}: {e})")
         r.assets[asset_id] = entry
+    for asset_id in sorted(config.asset_ids(sources) - set(assets)):  # its asset.toml is a problem above
+        r.assets[asset_id] = {"category": "?", "source": "?", "triangles": None}
+    if site is None:  # the floor plan is read with site.toml's levels and block names
+        return r
     from .ingest.floorplan import require_placements_and_platforms, scan_floorplan
 
     try:
-        fp, plan_problems = scan_floorplan(site.root / site.floorplan, known_assets=set(assets),
+        # every asset folder: a broken asset.toml is its own problem, not its INSERTs'
+        fp, plan_problems = scan_floorplan(site.root / site.floorplan, known_assets=config.asset_ids(sources),
                                            levels=set(site.level_names), options=site.floorplan_options)
     except UserError as e:
         r.problems.append(str(e))
@@ -78,19 +93,23 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
     return r
 
 
-def render(r: InfoReport, console: Console | None = None) -> None:
+def render(r: InfoReport, console: Console | None = None, errors: Console | None = None) -> None:
+    """The report on `console` (stdout); every problem on `errors` (stderr), one line
+    each, as `twin build` ends with its errors."""
     console = console or Console(width=140)
-    console.print(f"[bold]{r.site}[/] ({r.sources})")
+    errors = errors or Console(stderr=True, width=140)
+    console.print(f"[bold]{r.site or 'site.toml unread'}[/] ({r.sources})")
     table = Table("category", "asset", "source", "triangles", "placements")
     for asset_id, a in sorted(r.assets.items(), key=lambda kv: (kv[1]["category"], kv[0])):
         tri = "?" if a["triangles"] is None else f"{a['triangles']:,}"
         table.add_row(a["category"], asset_id, a["source"], tri, str(r.per_asset.get(asset_id, 0)))
     console.print(table)
-    levels = Table("level", "placements")
-    for level, n in r.per_level.items():
-        levels.add_row(level, str(n))
-    levels.add_row("[bold]all", str(sum(r.per_level.values())))
-    console.print(levels)
+    if r.site:  # the floor plan was read
+        levels = Table("level", "placements")
+        for level, n in r.per_level.items():
+            levels.add_row(level, str(n))
+        levels.add_row("[bold]all", str(sum(r.per_level.values())))
+        console.print(levels)
     if r.unused:
         console.print(f"assets no placement or scenario uses: {', '.join(r.unused)}")
     if r.ignored:
@@ -100,4 +119,4 @@ def render(r: InfoReport, console: Console | None = None) -> None:
     for w in r.warnings:
         console.print(f"[yellow]warning:[/] {escape(w)}")
     for p in r.problems:
-        console.print(f"[red]problem:[/] {escape(p)}")
+        errors.print(f"[red]error:[/] {escape(p)}", soft_wrap=True)

@@ -45,6 +45,34 @@ def register_exit_handler(staging: Path, marker: str) -> dict:
     return {}
 
 
+def die(staging: Path, **_) -> dict:
+    """An action whose worker dies under it, as the kernel's out-of-memory killer
+    ends a process (SIGKILL), after writing a part of an output."""
+    import signal
+
+    (staging / "up").mkdir(parents=True, exist_ok=True)
+    (staging / "up" / "b.txt").write_text("HALF")
+    os.kill(os.getpid(), signal.SIGKILL)
+    return {}
+
+
+def exhaust(staging: Path, src: str, name: str, **_) -> dict:
+    """An action refused the memory it asks for, after writing a part of an output."""
+    (staging / "up").mkdir(parents=True, exist_ok=True)
+    (staging / "up" / f"{name}.txt").write_text("HALF")
+    raise MemoryError
+
+
+def refuse(staging: Path, src: str, name: str, **_) -> dict:
+    """An action that finds its input bad (a user error naming the file and the object),
+    after writing a part of an output."""
+    from pipeline.errors import UserError
+
+    (staging / "up").mkdir(parents=True, exist_ok=True)
+    (staging / "up" / f"{name}.txt").write_text("HALF")
+    raise UserError(src, "line 1", "not a word")
+
+
 def _cpus() -> list[int] | None:
     """The CPUs the task's process may run on (None where the OS does not say)."""
     return sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None

@@ -48,8 +48,9 @@ ExecutorFactory = Callable[[Workers], Executor]
 
 
 def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict:
-    """One task, wherever it runs. User errors come back as data so the scheduler
-    reports them; a bug keeps its trace for the report, not the user's screen.
+    """One task, wherever it runs. User errors come back as data (with the file and
+    the object they name) so the scheduler reports them; running out of memory is
+    such a failure too; a bug keeps its trace for the report, not the user's screen.
     `cores`: the task's share of the cores for spare.beside and spread, which the
     scheduler gives when it submits the task (all of the build's to a task that
     starts with nothing beside it, the scene at the end of a cold build)."""
@@ -62,8 +63,12 @@ def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict
         result = action(staging=Path(staging), **args) or {}
         return {"ok": True, "result": result, "seconds": time.perf_counter() - t0}
     except UserError as e:
-        return {"ok": False, "user_error": str(e)}
-    except Exception as e:
+        return {"ok": False, "user_error": str(e), "file": e.file, "object": e.obj, "message": e.message}
+    except MemoryError:
+        # an allocation refused under the task's memory limit: the task fails, the
+        # worker lives on (what it held is freed with the frames of the action)
+        return {"ok": False, "error": "ran out of memory", "kind": "memory"}
+    except (Exception, SystemExit) as e:  # a task that exits ends itself, not the build
         return {"ok": False, "error": f"{type(e).__name__}: {e}", "trace": traceback.format_exc()}
     finally:
         if before is None:

@@ -117,6 +117,11 @@ class Task:
              on others imports them beforehand (a hint as well, not in the key).
     action:  a picklable callable `action(**args)` run in a worker; it writes the
              outputs into the staging folder it is given and returns a JSON-able dict.
+    problem: why the task cannot run, found by the planner (a UserError): the build
+             reports it as the task's failure without running it.
+    previous_ok: when a dependency fails, the task runs on what that dependency's
+             last success left in the build folder (if all of it is in place)
+             instead of being blocked.
     """
 
     name: str
@@ -130,6 +135,8 @@ class Task:
     outputs: tuple[str, ...] = ()
     cost: float = 0.0  # expected work (any unit): longer tasks start first; not in the key
     warm: tuple[str, ...] = ()  # modules to import ahead in an idle worker; not in the key
+    problem: Exception | None = None  # the planner's reason the task cannot run
+    previous_ok: bool = False  # runs on a failed dependency's last good outputs
     key: str = ""
     input_hashes: dict[str, str] = field(default_factory=dict)
 

@@ -39,3 +39,27 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
     for warning in p.floorplan.warnings:
         console.print(f"floor plan: {warning}", markup=False)  # the messages name [floorplan] keys
     return report
+
+
+def failure_lines(report: BuildReport, traces: bool = False) -> list[str]:
+    """What a build that failed somewhere tells its user at the end: each failure on
+    its own line (a user error names its file and object; anything else names its
+    task), then what was not built for want of it, and what was built on a failed
+    task's last outputs. `traces`: a bug's trace under its line."""
+    lines = []
+    for e in report.errors:
+        where = "" if "file" in e else f"{e['task']}: "
+        lines.append(f"error: {where}{e['error']}")
+        if traces and "trace" in e:
+            lines.append(e["trace"].rstrip("\n"))
+    by_cause: dict[tuple[str, ...], list[str]] = {}
+    for name, behind in report.blocked.items():
+        by_cause.setdefault(tuple(behind), []).append(name)
+    for behind, names in sorted(by_cause.items()):
+        cause = f" (blocked by {', '.join(behind)})" if behind else " (the build stopped)"
+        lines.append(f"not built: {', '.join(sorted(names))}{cause}")
+    for why in report.explanations:
+        if why.get("previous_of"):
+            lines.append(f"{why['task']}: made with the last good outputs of {', '.join(why['previous_of'])} "
+                         "(not made in this build)")
+    return lines

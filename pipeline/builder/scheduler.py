@@ -10,6 +10,11 @@
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
+- A failure fails its own task alone (keep going): a user error, a bug, memory
+  refused, or the death of its worker. Its staging folder goes, so neither the
+  cache nor build/ sees anything of it, and its state entry stays the last good
+  one. The tasks that need it are blocked; a task that may stand on what the
+  failed one made last (Task.previous_ok: the scene) runs on that instead.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import os
 import shutil
 import sys
 import uuid
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Future, wait
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,7 +43,9 @@ class BuildReport:
     explanations: list[dict] = field(default_factory=list)
     results: dict[str, dict] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
-    failed: list[tuple[str, str]] = field(default_factory=list)
+    failed: list[tuple[str, str]] = field(default_factory=list)  # (task, error) of each task that failed
+    errors: list[dict] = field(default_factory=list)  # each failure: task, error, and file, object, message, kind
+    blocked: dict[str, list[str]] = field(default_factory=dict)  # task not run -> the failed tasks it needs
     cache: dict = field(default_factory=dict)  # what pruning the cache did (Cache.prune)
 
     @property
@@ -160,7 +167,11 @@ class Scheduler:
         return tuple(usable[:self.cores]) if self.cores < len(usable) else ()
 
     # --- run --------------------------------------------------------------------
-    def run(self, tasks: list[Task], stop_on_error: bool = True) -> BuildReport:
+    def run(self, tasks: list[Task], stop_on_error: bool = False) -> BuildReport:
+        """Build what is out of date. A task that fails (a user error, a bug, memory,
+        its worker's death) fails alone: what depends on it is blocked, unless it
+        stands on that dependency's last good outputs (Task.previous_ok), and
+        everything else still runs. `stop_on_error`: start nothing after a failure."""
         order = check_graph(tasks)
         report = BuildReport()
         with BuildLock(self.build, notify=lambda m: print(m, file=sys.stderr)), self.cache.in_use():
@@ -169,21 +180,29 @@ class Scheduler:
             hasher = FileHasher(state.get("hashes"))
             digests: dict[str, str] = {}  # what each finished task made (its dependents' keys hold it)
             remade: set[str] = set()  # tasks run or restored in this build
+            broken: dict[str, list[str]] = {}  # task without new outputs -> the failed tasks behind it
+            suspects: set[str] = set()  # in flight when a worker died: rerun one at a time
             pending = {t.name: t for t in order}
             done: set[str] = set()
             running: dict[Future, Task] = {}
             warming: list[tuple[Future, tuple[str, ...]]] = []  # warm-ups sent to idle workers (_warm_idle)
-            pool = None
+            pool, threads = None, None
+            workers: dict = {}  # the pool's processes, kept to learn how one died
             try:
                 while pending or running:
                     # Longest first, and only as many in flight as there are workers, so a
                     # long task that becomes ready is not queued behind short ones.
                     ready = [t for t in pending.values() if all(d in done for d in t.deps)]
-                    for task in sorted(ready, key=lambda t: (-t.cost, t.name)):
+                    for task in sorted(ready, key=lambda t: (t.name not in suspects, -t.cost, t.name)):
                         name = task.name
                         pending.pop(name)
-                        if any(d in {f for f, _ in report.failed} for d in task.deps):
-                            report.failed.append((name, "skipped: a dependency failed"))
+                        if task.problem is not None:  # the planner found it cannot run
+                            self._fail(report, broken, task, _as_failure(task.problem))
+                            done.add(name)
+                            continue
+                        stood_on, missing = self._stand_in(task, broken, state, digests)
+                        if missing:
+                            self._block(report, broken, task, missing)
                             done.add(name)
                             continue
                         task.compute_key(hasher, digests, self.build)
@@ -194,34 +213,38 @@ class Scheduler:
                             renewed = sorted(d for d in task.deps if d in remade)
                             if renewed:  # they reran (or came from the cache) and made the same files
                                 why["cut_off_after"] = renewed
-                            report.explanations.append(why)
+                            report.explanations.append(_stood_on(why, stood_on))
                             report.results[name] = previous.get("result", {})
                             digests[name] = previous["digest"]
                             done.add(name)
                             self._tick(task)
                             continue
-                        remade.add(name)
                         if self.cache.has(task.key):
+                            remade.add(name)
                             meta = self._place(task, task.key)
-                            report.explanations.append(explain(task, previous, True, digests))
+                            report.explanations.append(_stood_on(explain(task, previous, True, digests), stood_on))
                             self._finish(state, task, digests, meta, report)
                             done.add(name)
                             continue
-                        if len(running) >= self.jobs:
+                        # while a dead worker's tasks are retried, one runs at a time
+                        if len(running) >= (1 if suspects else self.jobs):
                             pending[name] = task  # its turn comes when a worker is free
                             continue
+                        remade.add(name)
                         if pool is None:
-                            threads = self._worker_setup(order, state, hasher)
+                            if threads is None:
+                                threads = self._worker_setup(order, state, hasher)
                             pool = self.executor(Workers(self.jobs, threads, self._cpus()))
                         staging = self.build / ".staging" / task.key
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)
-                        report.explanations.append(explain(task, previous, False, digests))
+                        report.explanations.append(_stood_on(explain(task, previous, False, digests), stood_on))
                         # a task that starts with nothing running or waiting beside it
                         # gets every core (what becomes ready later shares them)
                         alone = not running and not any(t.name in pending for t in ready if t is not task)
                         cores = self.cores if alone else threads
                         running[pool.submit(run_task, task.action, task.args, str(staging), cores)] = task
+                        workers.update(_processes(pool))
                     if pool is not None:
                         self._warm_idle(pool, running, warming, pending, done)
                     if not running:
@@ -229,20 +252,33 @@ class Scheduler:
                             continue
                         break
                     finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
-                    for fut in finished:
+                    if any(isinstance(f.exception(), BrokenExecutor) for f in finished):
+                        # a worker died and its pool with it: every task in flight ends now
+                        finished, _ = wait(list(running))
+                    lost: list[Task] = []  # tasks whose worker died under them
+                    for fut in sorted(finished, key=lambda f: running[f].name):
                         task = running.pop(fut)
                         staging = self.build / ".staging" / task.key
-                        out = fut.result()
+                        try:
+                            out = fut.result()
+                        except BrokenExecutor:
+                            lost.append(task)
+                            continue
+                        except Exception as e:  # noqa: BLE001 - the executor's failure, not the build's
+                            out = {"ok": False, "error": f"{type(e).__name__}: {e}"}
                         if not out["ok"]:
-                            msg = out.get("user_error") or out.get("error")
-                            report.failed.append((task.name, msg))
-                            if "trace" in out:
-                                report.results[task.name] = {"trace": out["trace"]}
+                            self._fail(report, broken, task, out)
+                            suspects.discard(task.name)
                             shutil.rmtree(staging, ignore_errors=True)
                             done.add(task.name)
                             if stop_on_error:
-                                pending.clear()
+                                for waiting in list(pending.values()):
+                                    if waiting.name not in suspects:
+                                        pending.pop(waiting.name)
+                                        self._block(report, broken, waiting, waiting.deps, stopped=True)
+                                        done.add(waiting.name)
                             continue
+                        suspects.discard(task.name)
                         report.timings[task.name] = out["seconds"]
                         self.cache.put(task.key, staging, out["result"])
                         meta = self._place(task, task.key)
@@ -250,6 +286,11 @@ class Scheduler:
                         done.add(task.name)
                         state["hashes"] = hasher.memo
                         self._save_state(state)
+                    if lost:
+                        pool.shutdown(wait=True, cancel_futures=True)
+                        pool, warming = None, []
+                        self._worker_died(report, broken, lost, suspects, pending, done, workers)
+                        workers = {}
             finally:
                 if pool is not None:
                     pool.shutdown(wait=True, cancel_futures=True)
@@ -258,7 +299,79 @@ class Scheduler:
                 shutil.rmtree(self.build / ".staging", ignore_errors=True)
             if remade and self.cache_limit is not None:
                 report.cache = self.cache.prune(self.cache_limit, {e["key"] for e in state["tasks"].values()})
+        # in task order, not in the order workers happened to finish
+        report.errors.sort(key=lambda e: e["task"])
+        report.failed.sort()
         return report
+
+    def _stand_in(self, task: Task, broken: dict[str, list[str]], state: dict,
+                  digests: dict[str, str]) -> tuple[list[str], list[str]]:
+        """(the failed dependencies whose last good outputs `task` runs on, those it is
+        blocked by): a task stands on none unless Task.previous_ok, and on none whose
+        last outputs are not all in place. Those it stands on enter its key as the last
+        build recorded them, so a scene made from them before is still up to date."""
+        failed = [d for d in task.deps if d in broken]
+        if not failed or not task.previous_ok:
+            return [], failed
+        last = {d: state["tasks"].get(d) for d in failed}
+        missing = [d for d, entry in last.items() if not entry or "digest" not in entry
+                   or not all((self.build / rel).is_file() for rel in entry.get("files", []))]
+        if missing:
+            return [], missing
+        for d, entry in last.items():
+            digests[d] = entry["digest"]
+        return failed, []
+
+    def _fail(self, report: BuildReport, broken: dict[str, list[str]], task: Task, out: dict) -> None:
+        """A task that made nothing: its error in the report, its last outputs left as they were."""
+        error = {"task": task.name, **{k: out[k] for k in ("file", "object", "message", "kind", "trace") if k in out}}
+        error["error"] = out.get("user_error") or out.get("error") or "failed"
+        report.errors.append(error)
+        report.failed.append((task.name, error["error"]))
+        if "trace" in out:
+            report.results[task.name] = {"trace": out["trace"]}
+        for why in report.explanations:
+            if why["task"] == task.name:
+                why["failed"] = error["error"]
+                break
+        else:  # it never started (the planner refused it)
+            report.explanations.append({"task": task.name, "ran": False, "reason": "failed", "changed": [],
+                                        "failed": error["error"]})
+        broken[task.name] = [task.name]
+        self._tick(task)
+
+    def _block(self, report: BuildReport, broken: dict[str, list[str]], task: Task, deps,
+               stopped: bool = False) -> None:
+        """A task not run because `deps`, tasks it needs, failed or were blocked in turn
+        (or because the build stopped at a failure)."""
+        behind = sorted({b for d in deps if d in broken for b in broken[d]})
+        broken[task.name] = behind
+        report.blocked[task.name] = behind
+        reason = "not started: the build stopped at a failure" if stopped or not behind else \
+            "blocked by " + ", ".join(behind)
+        report.explanations.append({"task": task.name, "ran": False, "reason": reason, "changed": [],
+                                    "blocked_by": behind})
+        self._tick(task)
+
+    def _worker_died(self, report: BuildReport, broken: dict[str, list[str]], lost: list[Task], suspects: set[str],
+                     pending: dict[str, Task], done: set[str], workers: dict) -> None:
+        """A worker process died (killed, out of memory, a crash in native code) and its
+        pool with it. A task that was running alone killed it: it fails. Tasks that were
+        running side by side go back to wait and run one at a time until each has
+        either finished or died alone."""
+        for task in lost:
+            shutil.rmtree(self.build / ".staging" / task.key, ignore_errors=True)
+        if len(lost) == 1:
+            task = lost[0]
+            suspects.discard(task.name)
+            self._fail(report, broken, task, {"error": "its worker process died" + _death(workers), "kind": "worker"})
+            done.add(task.name)
+            return
+        names = {t.name for t in lost}
+        report.explanations[:] = [e for e in report.explanations if e["task"] not in names]
+        for task in lost:
+            suspects.add(task.name)
+            pending[task.name] = task
 
     def _warm_idle(self, pool, running: dict, warming: list[tuple[Future, tuple[str, ...]]],
                    pending: dict[str, Task], done: set[str]) -> None:
@@ -289,3 +402,46 @@ class Scheduler:
     def _tick(self, task: Task) -> None:
         if self.progress is not None:
             self.progress(task)
+
+
+def _as_failure(problem: Exception) -> dict:
+    """A planner's refusal as a worker's failure (executors.run_task)."""
+    if isinstance(problem, UserError):
+        return {"user_error": str(problem), "file": problem.file, "object": problem.obj, "message": problem.message}
+    return {"error": f"{type(problem).__name__}: {problem}"}
+
+
+def _stood_on(why: dict, failed: list[str]) -> dict:
+    """An explanation that names the failed dependencies whose last outputs the task used."""
+    if failed:
+        why["previous_of"] = failed
+    return why
+
+
+def _processes(pool) -> dict:
+    """A local pool's worker processes by pid (empty for other executors): their exit
+    codes say how one died."""
+    return dict(getattr(pool, "_processes", None) or {})
+
+
+def _death(workers: dict) -> str:
+    """How a pool's worker died, from the exit codes of its processes: the pool
+    terminates the others (SIGTERM) when one dies."""
+    import signal
+
+    codes = set()
+    for process in workers.values():
+        code = getattr(process, "exitcode", None)
+        if code not in (None, 0, -signal.SIGTERM):
+            codes.add(code)
+    if len(codes) != 1:
+        return ""
+    code = codes.pop()
+    if code == -signal.SIGKILL:
+        return " (killed: SIGKILL, as the kernel's out-of-memory killer sends)"
+    if code < 0:
+        try:
+            return f" ({signal.Signals(-code).name})"
+        except ValueError:
+            return f" (signal {-code})"
+    return f" (exit code {code})"

@@ -21,6 +21,10 @@ three tasks:
 So editing an asset's description, category, mass or triangle budget rewrites its
 package and leaves its geometry alone; editing an LOD budget reruns the last two and
 reads no source; editing the source reruns all three.
+
+An asset whose asset.toml cannot be read is one task, `asset:<id>`, that fails with
+that error without running (Task.problem): the other assets build, and the scene
+stands on the asset's last package if the build folder holds one (Task.previous_ok).
 """
 
 from __future__ import annotations
@@ -122,16 +126,22 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
     passed = config.PassedChecks(before)
     site = config.load_site(sources / "site.toml", passed)
     assets, problems = config.load_assets(sources, passed)
-    if problems:
-        raise problems[0]
-    if checked is not None and passed.met != before:
+    if checked is not None and not problems and passed.met != before:
         _write_passed(checked, passed.met)
+    known = config.asset_ids(sources)
     plan_path = site.root / site.floorplan
-    fp = read_floorplan_memo(plan_path, set(assets), set(site.level_names), memo, site.floorplan_options)
+    fp = read_floorplan_memo(plan_path, known, set(site.level_names), memo, site.floorplan_options)
     placed = {p.asset_id for p in fp.placements}
-    used = sorted(placed | (scenario_assets(sources) & set(assets)))
-    unused = sorted(set(assets) - set(used))
-    return Plan(site=site, floorplan=fp, assets=assets, used=used, unused=unused)
+    used = sorted(placed | (scenario_assets(sources) & known))
+    unused = sorted(known - set(used))
+    return Plan(site=site, floorplan=fp, assets=assets, used=used, unused=unused, problems=problems)
+
+
+def asset_of(problem: UserError) -> str:
+    """The asset a problem of config.load_assets belongs to: it names the asset.toml,
+    or the asset's folder when the id itself is refused."""
+    path = Path(problem.file)
+    return path.parent.name if path.name == "asset.toml" else path.name
 
 
 def _read_passed(path: Path | None) -> set[str]:
@@ -165,12 +175,18 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
     from .cache import cache_root
 
     p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME)
-    wanted = p.used
+    broken = {asset_of(e): e for e in p.problems}
+    wanted = sorted(set(p.used) - set(broken))
     if only:
         for a in only:
-            if a not in p.assets:
+            if a not in p.assets and a not in broken:
                 raise UserError(Path(sources) / "assets", a, "no such asset")
-        wanted = sorted(only)
+        wanted = sorted(set(only) - set(broken))
+        broken = {a: e for a, e in broken.items() if a in only}
+    # every broken asset.toml is reported, used or not: the sources are wrong either way
+    for asset_id, problem in sorted(broken.items()):
+        p.tasks.append(Task(name=f"asset:{asset_id}", stage="assets", action=build_asset, args={},
+                            outputs=(f"models/{asset_id}/", f"models/{asset_id}__lod*"), problem=problem))
     source_code = code_version(*SOURCE_CODE)
     geometry_code, package_code = code_version(*GEOMETRY_CODE), code_version(*PACKAGE_CODE)
     checks_code = code_version(*CHECKS_CODE)
@@ -236,7 +252,9 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     terrain = Task(name="terrain", stage="terrain", action=build_terrain, args=args, inputs=inputs,
                    params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
     placed_assets = sorted({pl.asset_id for pl in p.floorplan.placements})
+    # a placed asset that fails in this build is placed from its last package, so one
+    # broken source does not hold back every other asset's changes
     scene = Task(name="scene", stage="scene", action=build_scene, args=args, inputs=inputs,
                  deps=("terrain", *(f"asset:{a}" for a in placed_assets)),
-                 params={"site": site.name}, code=code, outputs=("scene/",), warm=SCENE_WARM)
+                 params={"site": site.name}, code=code, outputs=("scene/",), warm=SCENE_WARM, previous_ok=True)
     return [terrain, scene]

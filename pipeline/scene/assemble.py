@@ -29,9 +29,11 @@ def _load(sources: Path, build: Path | None = None):
     from ..ingest.floorplan import MEMO_NAME, read_floorplan_memo
 
     site = config.load_site(Path(sources) / "site.toml")
-    assets, _ = config.load_assets(Path(sources))
+    # every asset folder, as the planner reads the plan: a placed asset whose build
+    # failed is placed from its last package
+    assets = config.asset_ids(Path(sources))
     memo = None if build is None else Path(build) / MEMO_NAME
-    fp = read_floorplan_memo(site.root / site.floorplan, set(assets), set(site.level_names), memo,
+    fp = read_floorplan_memo(site.root / site.floorplan, assets, set(site.level_names), memo,
                              site.floorplan_options)
     origin = site.origin or default_origin(site, fp.platforms)
     return site, fp, Georeferencer(site, origin)
