@@ -1011,8 +1011,8 @@ def _tank_shot(site, when, pose, lens, e, a, g, level) -> Shot:
     from . import nodes
 
     p = site.placement(STUDY_TARGET)
-    ob = nodes.Observed(p["tag"], p["state"], p["asset"], site.manifests[p["asset"]])
-    values = {p["state"]: {"oil_level_tank": level}}
+    ob = nodes.Observed(p["tag"], p.get("state"), p["asset"], site.manifests[p["asset"]])
+    values = {p.get("state"): {"oil_level_tank": level}}
     return Shot(when, pose, lens, e, a, g, {p["tag"]: {"oil_level_tank": level}},
                 nodes.visual_states(values, [ob]), STUDY_TARGET)
 

@@ -119,19 +119,23 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
 
 
 def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hist: dict, findings: list) -> dict:
-    """placements.json: every placement's ENU pose, LOD and distance, and the checks."""
+    """placements.json: every placement's ENU pose, LOD and distance, and the checks.
+    An index for the runtime and for people: lengths to the micrometre, yaw to 1e-9
+    rad, heading to 1e-7 degree, distances to the millimetre (the scene files hold the
+    poses in full); a state only where the placement has one."""
     return {
         "site": site.name, "crs": site.crs, "timezone": site.timezone,
         "origin": {"latitude_deg": origin[0], "longitude_deg": origin[1], "height_m": origin[2]},
         "sun": sun, "terrain": terrain, "lod_histogram": lod_hist,
         "placements": [{
             "tag": p.placement.tag, "asset": p.placement.asset_id, "level": p.placement.level,
-            "state": p.placement.state, "plan": [p.placement.x, p.placement.y, p.placement.z],
+            **({"state": p.placement.state} if p.placement.state else {}),
+            "plan": [round(v, 6) for v in (p.placement.x, p.placement.y, p.placement.z)],
             "dxf_handles": list(p.placement.dxf_handles),
             **({"scale": p.placement.scale} if p.placement.scale != 1.0 else {}),
-            "heading_deg": p.placement.heading_deg, "enu": [float(v) for v in p.pose[:3, 3]],
-            "yaw_rad": p.yaw, "lod": p.lod,
-            "distance_m": None if not np.isfinite(p.distance_m) else round(p.distance_m, 6),
+            "heading_deg": round(p.placement.heading_deg, 7), "enu": [round(float(v), 6) for v in p.pose[:3, 3]],
+            "yaw_rad": round(p.yaw, 9), "lod": p.lod,
+            "distance_m": None if not np.isfinite(p.distance_m) else round(p.distance_m, 3),
         } for p in sorted(placed, key=lambda p: p.placement.tag)],
         "findings": findings,
         "ignored_entities": [list(x) for x in fp.ignored],
@@ -146,7 +150,7 @@ def _json_by_line(record: dict) -> str:
     for key in sorted(record):
         value = record[key]
         if isinstance(value, list) and value:
-            items = ",\n".join(f"  {json.dumps(v, sort_keys=True)}" for v in value)
+            items = ",\n".join(f"  {json.dumps(v, sort_keys=True, separators=(',', ':'))}" for v in value)
             fields.append(f" {json.dumps(key)}: [\n{items}\n ]")
         else:
             fields.append(f" {json.dumps(key)}: {json.dumps(value, sort_keys=True)}")
