@@ -4,6 +4,7 @@ when the tool is missing, and never resolve external XML entities."""
 from __future__ import annotations
 
 import json
+import shutil
 import struct
 import sys
 
@@ -86,18 +87,29 @@ def _world(path, model: str, names: list[str], extra: str = "", uris: dict | Non
     return path
 
 
+def _copies(parent, asset, count: int) -> list[str]:
+    """Model folders `<id>_<k>`: the same model under other URIs (includes of other forms)."""
+    names = [f"{asset.id}_{k}" for k in range(count)]
+    for name in names:
+        if not (parent / name).exists():
+            shutil.copytree(parent / asset.id, parent / name)
+    return names
+
+
 def test_world_in_parts_agrees_with_the_whole_check(package, tmp_path):
-    """Seven includes in parts of three: every part passes where the whole file does,
-    and an include of a model that does not exist fails the part that holds it, named."""
+    """Seven includes of seven models in parts of three: every part passes where the
+    whole file does, and an include of a model that does not exist fails the part that
+    holds it, named."""
     parent, asset = package
     names = [f"m{k}" for k in range(1, 8)]
-    good = _world(tmp_path / "good.sdf", asset.id, names)
+    uris = dict(zip(names, _copies(parent, asset, 7)))
+    good = _world(tmp_path / "good.sdf", asset.id, names, uris=uris)
     whole, parts = external.ign_sdf(good, [parent]), external.ign_sdf_world(good, [parent], part_includes=3)
     _require_sdf(whole)
     assert whole.status == parts.status == "passed", parts.messages
-    assert parts.validator.endswith("in 3 parts of up to 3 includes")
+    assert parts.validator.endswith("in 3 parts of up to 3 includes") and "of each form" not in parts.validator
 
-    bad = _world(tmp_path / "bad.sdf", asset.id, names, uris={"m5": "no_such_model"})
+    bad = _world(tmp_path / "bad.sdf", asset.id, names, uris={**uris, "m5": "no_such_model"})
     whole, parts = external.ign_sdf(bad, [parent]), external.ign_sdf_world(bad, [parent], part_includes=3)
     assert whole.status == parts.status == "failed"
     assert parts.messages and all(m.startswith("part 2 (includes m4 .. m6): ") for m in parts.messages)
@@ -131,12 +143,38 @@ def test_world_parts_hold_every_element_once(tmp_path):
     seen = []
     for k, first in enumerate(range(0, 5, 2)):
         part = tmp_path / f"part{k}.sdf"
-        external._write_part(tree, first, first + 2, part)
+        external._write_part(tree, list(range(first, min(first + 2, 5))), part)
         w = etree.parse(str(part)).getroot().find("world")
         seen += [i.findtext("name") for i in w.findall("include")]
         assert [e.tag for e in w if e.tag != "include"] == ["light", "frame"]
     assert seen == [f"m{k}" for k in range(5)]
     assert len(tree.getroot().find("world").findall("include")) == 5  # the source tree untouched
+
+
+def test_world_checks_one_include_of_each_form(package, tmp_path):
+    """40 includes of two models pass as 2 checked includes; an include of a missing
+    model, one whose pose sdformat must judge (seven numbers) and one without a name are
+    each checked themselves, and fail as the whole check does."""
+    parent, asset = package
+    other = _copies(parent, asset, 1)[0]
+    names = [f"m{k}" for k in range(40)]
+    uris = {n: other for n in names[1::2]}
+    good = _world(tmp_path / "good.sdf", asset.id, names, uris=uris)
+    result = external.ign_sdf_world(good, [parent], part_includes=8)
+    _require_sdf(result)
+    assert result.status == "passed", result.messages
+    assert "2 of 40 includes (one of each form" in result.validator and "parts" not in result.validator
+
+    bad = _world(tmp_path / "bad.sdf", asset.id, names, uris={**uris, "m7": "no_such_model"})
+    text = bad.read_text().replace("<pose>9 0 0 0 0 0</pose>", "<pose>9 0 0 0 0 0 1</pose>")
+    bad.write_text(text.replace("<name>m20</name>", ""))
+    tree = etree.parse(str(bad))
+    assert external._include_forms(tree.getroot().find("world").findall("include")) == [0, 1, 7, 9, 20]
+    whole, checked = external.ign_sdf(bad, [parent]), external.ign_sdf_world(bad, [parent], part_includes=8)
+    assert whole.status == checked.status == "failed"
+    assert "5 of 40 includes" in checked.validator
+    assert any("no_such_model" in m for m in checked.messages)
+    assert any("must have 6 values" in m for m in checked.messages), checked.messages
 
 
 # --- COLLADA ---------------------------------------------------------------------------
@@ -229,6 +267,24 @@ def test_usd_validator_errors_fail(tmp_path):
     assert any("DefaultPrim" in m for m in result.messages)
 
 
+def test_usd_errors_inside_instances_are_found_once_per_prototype(tmp_path):
+    """A model whose mesh binds a material without MaterialBindingAPI, referenced by
+    three instances: its error is found once, at the prototype, as the stage's own
+    traversal finds it at each instance."""
+    pytest.importorskip("pxr")
+    (tmp_path / "model.usda").write_text(
+        '#usda 1.0\n(\n    defaultPrim = "M"\n    metersPerUnit = 1\n    upAxis = "Z"\n)\n'
+        'def Xform "M"\n{\n    def Mesh "body"\n    {\n        rel material:binding = </M/Mat>\n    }\n'
+        '    def Material "Mat" {}\n}\n')
+    instances = "".join(f'    def Xform "{n}" (instanceable = true\n        prepend references = @model.usda@) {{}}\n'
+                        for n in "ABC")
+    (tmp_path / "scene.usda").write_text('#usda 1.0\n(\n    defaultPrim = "Site"\n    metersPerUnit = 1\n'
+                                         f'    upAxis = "Z"\n)\ndef Xform "Site"\n{{\n{instances}}}\n')
+    result = external.usd_validation(tmp_path / "scene.usda")
+    assert result.status == "failed"
+    assert [m.split(":")[0] for m in result.messages] == ["MissingMaterialBindingAPI"]
+
+
 # --- missing tools ---------------------------------------------------------------------
 
 def test_missing_tools_are_skipped_with_install_hint(package, tmp_path, monkeypatch):
@@ -252,3 +308,48 @@ def test_missing_gltf_module_and_pxr_are_skipped(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "pxr", None)  # import pxr now raises ImportError
     usd = external.usd_validation(tmp_path / "any.usda")
     assert usd.status == "skipped" and "usd-core" in usd.install_hint
+
+
+def _grouped_world(path, parent, asset, count: int) -> Path:
+    """A world holding `count` placements of the package grouped in one model, as the
+    scene's world writer groups them."""
+    from pipeline import ir
+    from pipeline.scene.placements import Placed, yaw_matrix
+    from pipeline.scene.world_sdf import grouped_model
+
+    members = [Placed(ir.Placement(f"P{k}", asset.id, "L1", 3.0 * k, 0.0), yaw_matrix(0.1 * k, (3.0 * k, 0.0, 0.0)),
+                      0.1 * k) for k in range(count)]
+    sdf = etree.Element("sdf", version="1.9")
+    world = etree.SubElement(sdf, "world", name="w")
+    world.append(grouped_model(asset.id, parent / asset.id / "model.sdf", members))
+    path.write_bytes(etree.tostring(sdf, xml_declaration=True, encoding="UTF-8"))
+    return path
+
+
+def test_world_checks_one_grouped_placement_of_each_form(package, tmp_path):
+    """30 placements grouped in a model are checked as one; a placement whose visual
+    differs (a pose sdformat refuses) is checked itself and fails as the whole file
+    does; two frames of one name are both checked, and named here."""
+    parent, asset = package
+    good = _grouped_world(tmp_path / "good.sdf", parent, asset, 30)
+    result = external.ign_sdf_world(good, [parent])
+    _require_sdf(result)
+    assert result.status == "passed", result.messages
+    assert "1 of 30 placements grouped in models (one of each form" in result.validator
+
+    tree = etree.parse(str(good))
+    visuals = tree.getroot().findall(".//link/visual")
+    odd = next(v for v in visuals if v.get("name").startswith("P17__"))
+    odd.find("pose").text = "1 2 3"
+    tree.write(str(tmp_path / "bad.sdf"))
+    whole, checked = external.ign_sdf(tmp_path / "bad.sdf", [parent]), external.ign_sdf_world(tmp_path / "bad.sdf", [parent])
+    assert whole.status == checked.status == "failed"
+    assert "2 of 30 placements" in checked.validator
+    assert any("must have 6 values" in m for m in checked.messages), checked.messages
+
+    text = good.read_text().replace('name="P21"', 'name="P4"').replace('relative_to="P21"', 'relative_to="P4"')
+    (tmp_path / "twice.sdf").write_text(text.replace('name="P21__', 'name="P4x__'))
+    checked = external.ign_sdf_world(tmp_path / "twice.sdf", [parent])
+    assert checked.status == "failed"
+    assert checked.messages[0] == f"Error: the name 'P4' is used by 2 elements of model '{asset.id}'"
+    assert any("P4" in m for m in checked.messages[1:])  # both are checked: sdformat says so too

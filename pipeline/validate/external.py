@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import functools
 import json
+import math
 import os
 import re
 import shutil
@@ -18,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -131,62 +133,195 @@ def _run_sdf_check(name: str, cmd: list[str], path: Path, env: dict) -> External
 # includes, two at a time, 29.2 s / 4.0 GB, 27.1 s / 2.4 GB and 29.6 s / 1.8 GB (time /
 # peak of the process tree). A world with more includes than this is checked in parts.
 WORLD_PART_INCLUDES = 32
-# attributes through which one element of a world names another's frame
-_FRAME_REFERENCES = ("relative_to", "attached_to", "placement_frame")
+# Where one top-level element of a world names another's frame (inside a model, names
+# are the model's own).
+_WORLD_REFERENCES = "./*[@attached_to or @placement_frame] | ./*/pose[@relative_to] | ./*/placement_frame | ./joint"
+# A name that sdformat takes as it is: no scope delimiter, not reserved.
+_PLAIN_NAME = re.compile(r"^(?!__)(?!world$)[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
 
 def ign_sdf_world(path: Path, sdf_path: list[Path], part_includes: int = WORLD_PART_INCLUDES,
                   workers: int = 2) -> ExternalResult:
-    """ign_sdf on a world, in parts of at most `part_includes` of its <include>s when it
-    has more, so that memory stays bounded (2.4 GB for two parts at once on the sample)
-    and the check's time grows with the includes, not faster.
+    """ign_sdf on what sdformat must see of a world (_reduce_world: of the includes and
+    of the placements grouped in models that repeat one another's form, one of each),
+    in parts of at most `part_includes` includes when it has more, so that memory
+    stays bounded (2.4 GB for two parts at once on the sample) and the check's time
+    grows with the forms, not with the placements.
 
-    Each part is the world file without the includes of the other parts: the parts
-    hold every element of the file between them, each include checked in the same
-    world as written. Two things a part cannot see: another part's frames (a world in
-    which an element names another's, through `relative_to`, `attached_to` or
-    `placement_frame`, is checked whole) and another part's names (sdformat requires
-    siblings' names to be unique; that is checked here, over the whole world).
-    `workers`: parts checked at once."""
+    Each part is that world with only its own share of the includes: every other
+    element is in each part, each include checked in the same world as written. What
+    a part cannot see: another element's frames (a world whose top-level elements name
+    one another's, through `relative_to`, `attached_to` or `placement_frame`, is
+    checked whole) and the names of what is not checked (sdformat requires siblings'
+    names to be unique; that is checked here, over the whole world). `workers`: parts
+    checked at once."""
     path = Path(path)
     try:
         tree = etree.parse(str(path), _hardened_parser())
     except (OSError, etree.XMLSyntaxError):
         return ign_sdf(path, sdf_path)  # sdformat gives the file's error as it sees it
     world = tree.getroot().find("world")
-    includes = [] if world is None else world.findall("include")
-    crossed = any(tree.xpath(f"//@{name}") for name in _FRAME_REFERENCES)
-    if len(includes) <= part_includes or crossed:
+    if world is None or world.xpath(_WORLD_REFERENCES):
+        return ign_sdf(path, sdf_path)
+    reduced, stand_in = _reduce_world(tree)
+    includes = reduced.getroot().find("world").findall("include")
+    if not stand_in and len(includes) <= part_includes:
         return ign_sdf(path, sdf_path)
     duplicates = _duplicate_names(world)
-    starts = range(0, len(includes), part_includes)
-    runs = [includes[i:i + part_includes] for i in starts]
+    runs = [list(range(i, min(i + part_includes, len(includes)))) for i in range(0, len(includes), part_includes)]
+    runs = runs or [[]]
     with tempfile.TemporaryDirectory() as folder:
         parts = [Path(folder) / f"{path.stem}.part{k}.sdf" for k in range(1, len(runs) + 1)]
-        for part, i in zip(parts, starts):
-            _write_part(tree, i, i + part_includes, part)
+        for part, run in zip(parts, runs):
+            _write_part(reduced, run, part)
         with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
             results = list(pool.map(lambda p: ign_sdf(p, sdf_path), parts))
-    name = f"{results[0].validator}, in {len(parts)} parts of up to {part_includes} includes"
+    name = results[0].validator + (f", on {stand_in}" if stand_in else "")
+    if len(parts) > 1:
+        name += f", in {len(parts)} parts of up to {part_includes} includes"
     if results[0].status == "skipped":
         return ExternalResult(results[0].validator, str(path), "skipped", results[0].messages, _SDF_HINT)
     messages = list(duplicates)
     for k, (run, part, r) in enumerate(zip(runs, parts, results), start=1):
         if r.status != "passed":
-            span = f"part {k} (includes {_include_name(run[0])} .. {_include_name(run[-1])})"
+            span = (f"part {k} (includes {_include_name(includes[run[0]])} .. {_include_name(includes[run[-1]])}): "
+                    if len(parts) > 1 else "")
             # the part's temporary path would differ from run to run: the world's name instead
-            messages += [f"{span}: {m.replace(str(part), path.name)}" for m in r.messages or ("failed",)]
+            messages += [f"{span}{m.replace(str(part), path.name)}" for m in r.messages or ("failed",)]
     return ExternalResult(name, str(path), "failed" if messages else "passed", tuple(messages), _SDF_HINT)
 
 
-def _write_part(tree, first: int, stop: int, part: Path) -> None:
-    """The world with only its includes first .. stop - 1 (in file order), the rest as is."""
+def _write_part(tree, keep: list[int], part: Path) -> None:
+    """The world with only its includes `keep` (positions in file order), the rest as is."""
     part_tree = copy.deepcopy(tree)
     world = part_tree.getroot().find("world")
+    kept = set(keep)
     for k, include in enumerate(world.findall("include")):
-        if not first <= k < stop:
+        if k not in kept:
             world.remove(include)
     part_tree.write(str(part), xml_declaration=True, encoding="UTF-8")
+
+
+def _reduce_world(tree) -> tuple[etree._ElementTree, str]:
+    """A copy of the world without the includes and the grouped placements whose form
+    one kept before has (_include_forms, _reduce_members), and what it keeps of what
+    ("" when it keeps everything)."""
+    reduced = copy.deepcopy(tree)
+    world = reduced.getroot().find("world")
+    includes = world.findall("include")
+    kept = set(_include_forms(includes))
+    for k, include in enumerate(includes):
+        if k not in kept:
+            world.remove(include)
+    frames = removed = 0
+    for model in world.findall("model"):
+        total, gone = _reduce_members(model)
+        frames, removed = frames + total, removed + gone
+    said = ([f"{len(kept):,} of {len(includes):,} includes"] if len(kept) < len(includes) else []) + (
+        [f"{frames - removed:,} of {frames:,} placements grouped in models"] if removed else [])
+    if not said:
+        return reduced, ""
+    return reduced, " and ".join(said) + " (one of each form: the others differ from it only in a plain name and pose)"
+
+
+def _include_forms(includes: list) -> list[int]:
+    """Positions of the includes sdformat must see: the first of each form (the include
+    without its <name> and <pose> texts), and every include whose name or pose is not
+    plain (a name as _PLAIN_NAME, a pose of six finite numbers), which sdformat judges
+    alone. sdformat loads an include from its URI and its other elements, and takes a
+    plain name and pose as they are; the names' uniqueness is checked over the world."""
+    firsts: set[bytes] = set()
+    out = []
+    for k, include in enumerate(includes):
+        if not (_plain_name(include.findtext("name")) and _plain_pose(include.findtext("pose"))):
+            out.append(k)
+            continue
+        form = b"".join(_c14n(c, blank=c.tag in ("name", "pose")) for c in include) + _c14n(include, empty=True)
+        if form not in firsts:
+            firsts.add(form)
+            out.append(k)
+    return out
+
+
+# A link's visuals and collisions posed relative to a frame, and every naming of a frame
+# in a model (no unions: libxml2 merges a union's node sets in time that grows with the
+# square of their size).
+_POSED = ("link/visual/pose[@relative_to]", "link/collision/pose[@relative_to]")
+_NAMING = (".//@*[local-name() = 'relative_to' or local-name() = 'attached_to' or local-name() = 'placement_frame'"
+           " or local-name() = 'canonical_link']", ".//*[self::parent or self::child or self::placement_frame]/text()")
+
+
+def _reduce_members(model) -> tuple[int, int]:
+    """Remove from a model the frames of its own (a placement each, as the scene's
+    grouped models hold them) whose form a frame kept before has, with the visuals and
+    collisions posed relative to them. A frame's form: the frame without its name and
+    pose text, and its elements with its name in theirs written as a placeholder. A
+    frame whose name or pose is not plain, whose name another frame has too, or that
+    anything but such an element's pose names, is kept. Returns (frames, removed)."""
+    frames = model.findall("frame")
+    if len(frames) < 2:
+        return len(frames), 0
+    posed: dict[str, list] = {}
+    for pose in (p for query in _POSED for p in model.xpath(query)):
+        posed.setdefault(pose.get("relative_to"), []).append(pose.getparent())
+    named = Counter(str(v).strip() for query in _NAMING for v in model.xpath(query))
+    named.subtract({tag: len(items) for tag, items in posed.items()})  # what anything but those poses names
+    named.update(Counter(f.get("name") for f in frames) - Counter(set(f.get("name") for f in frames)))  # shared
+    firsts: set[bytes] = set()
+    removed = 0
+    for frame in frames:
+        tag = frame.get("name") or ""
+        if named[tag] > 0 or not _plain_name(tag) or not _plain_pose(frame.findtext("pose")):
+            continue
+        form = _c14n(frame, blank=True, unnamed=True) + b"".join(
+            item.getparent().get("name", "").encode() + _renamed(item, tag) for item in posed.get(tag, []))
+        if form not in firsts:
+            firsts.add(form)
+            continue
+        model.remove(frame)
+        for item in posed.get(tag, []):
+            item.getparent().remove(item)
+        removed += 1
+    return len(frames), removed
+
+
+def _c14n(el, *, blank: bool = False, empty: bool = False, unnamed: bool = False) -> bytes:
+    """Canonical bytes of an element. blank: without its text and its children's
+    texts; empty: without its children; unnamed: without its name attribute."""
+    if not (blank or empty or unnamed):
+        return etree.tostring(el, method="c14n", with_tail=False)
+    el = copy.deepcopy(el)
+    el.tail = None
+    if empty:
+        el[:] = []
+    if unnamed:
+        el.attrib.pop("name", None)
+    for sub in el.iter(tag=etree.Element):
+        if blank:
+            sub.text = None
+    return etree.tostring(el, method="c14n")
+
+
+def _renamed(item, name: str) -> bytes:
+    """Canonical bytes of an element posed relative to the frame `name` (a plain name:
+    XML writes it as it is), with that name where it begins a name or is the
+    relative_to written as a placeholder."""
+    return (_c14n(item).replace(f'name="{name}'.encode(), b'name="\xef\xbf\xbd')
+            .replace(f'relative_to="{name}"'.encode(), b'relative_to="\xef\xbf\xbd"'))
+
+
+def _plain_name(text: str | None) -> bool:
+    return text is not None and _PLAIN_NAME.match(text.strip()) is not None
+
+
+def _plain_pose(text: str | None) -> bool:
+    if text is None:
+        return True
+    values = text.split()
+    try:
+        return len(values) == 6 and all(math.isfinite(float(v)) for v in values)
+    except ValueError:
+        return False
 
 
 def _include_name(include) -> str:
@@ -195,23 +330,37 @@ def _include_name(include) -> str:
 
 
 def _duplicate_names(world) -> list[str]:
-    """Names two of the world's frame-bearing children share (SDF 1.7+: models,
-    includes, actors, lights and frames of one world share one namespace)."""
+    """Names two siblings share where sdformat requires them unique (SDF 1.7+): the
+    world's models, includes, actors, lights and frames; a model's links, joints,
+    frames and models; a link's visuals, and its collisions."""
+    out = _shared(world, ("model", "include", "actor", "light", "frame"), "elements of the world")
+    for model in world.findall("model"):
+        out += _shared(model, ("link", "joint", "frame", "model"), f"elements of model {model.get('name')!r}")
+        for link in model.findall("link"):
+            for kind in ("visual", "collision"):
+                out += _shared(link, (kind,), f"{kind}s of link {link.get('name')!r} of model {model.get('name')!r}")
+    return out
+
+
+def _shared(parent, kinds: tuple[str, ...], what: str) -> list[str]:
     seen: dict[str, int] = {}
-    for child in world:
-        if not isinstance(child.tag, str) or child.tag not in ("model", "include", "actor", "light", "frame"):
+    for child in parent:
+        if not isinstance(child.tag, str) or child.tag not in kinds:
             continue
         name = child.findtext("name") if child.tag == "include" else child.get("name")
         if name:
             seen[name.strip()] = seen.get(name.strip(), 0) + 1
-    return [f"Error: the name {n!r} is used by {c} elements of the world" for n, c in sorted(seen.items()) if c > 1]
+    return [f"Error: the name {n!r} is used by {c} {what}" for n, c in sorted(seen.items()) if c > 1]
 
 
 # --- USD ------------------------------------------------------------------------------
 
 def usd_validation(path: Path) -> ExternalResult:
     """pxr.UsdValidation with every registered validator; only errors fail. Also checks
-    metersPerUnit == 1 and upAxis == Z, which the validators only require to exist."""
+    metersPerUnit == 1 and upAxis == Z, which the validators only require to exist.
+    Instances are validated through their prototypes, once per prototype: an instance's
+    prims are its prototype's (the stage's own traversal would go through every
+    instance's proxies, the placements of a scene times its models' prims)."""
     name = "pxr.UsdValidation"
     try:
         from pxr import Usd, UsdGeom, UsdValidation
@@ -220,8 +369,10 @@ def usd_validation(path: Path) -> ExternalResult:
     stage = Usd.Stage.Open(str(path))
     if stage is None:
         return ExternalResult(name, str(path), "failed", ("USD could not open the file",), _USD_HINT)
-    registry = UsdValidation.ValidationRegistry()
-    errors = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators()).Validate(stage)
+    context = UsdValidation.ValidationContext(UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
+    errors = list(context.Validate(stage, Usd.PrimDefaultPredicate))
+    for prototype in stage.GetPrototypes():
+        errors += context.Validate(Usd.PrimRange(prototype))
     messages = [f"{e.GetName()}: {e.GetMessage()}" for e in errors
                 if e.GetType() == UsdValidation.ValidationErrorType.Error]
     if UsdGeom.GetStageMetersPerUnit(stage) != 1.0:
