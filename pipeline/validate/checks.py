@@ -75,7 +75,7 @@ RULES: dict[str, tuple[str, str, str]] = {
     "GZ005": ("error", "gazebo", "Gazebo's normals or texture coordinates differ from the file's"),
     "GZ006": ("error", "gazebo", "a model's visual bounds in Gazebo differ from its manifest's"),
     "GZ007": ("error", "gazebo", "sdformat reports an error loading the world as Gazebo's server does"),
-    "GZ008": ("warning", "gazebo", "the world costs sdformat more than the parse budget (time or memory)"),
+    "GZ008": ("warning", "gazebo", "the world costs sdformat more memory to parse than the budget (1.5 GB)"),
     "GZ009": ("error", "gazebo", "a mesh the world references was not loaded by the probe (missing or unresolved)"),
     "GZ010": ("error", "gazebo", "the COLLADA file's triangles cannot be read (a missing source or a malformed index list)"),
     "GZ011": ("error", "gazebo", "dartsim cannot build the world as gz-sim's Physics system does"),
@@ -196,6 +196,17 @@ def mesh_findings(mesh: ir.Mesh, site: str, *, collision: bool = False, memo=Non
     memo.put(key, {"codes": np.array([f.code for f in found], dtype=np.str_),
                    "messages": np.array([f.message for f in found], dtype=np.str_)})
     return found
+
+
+def visual_verdict(mesh: ir.Mesh, memo=None) -> tuple[frozenset[str], tuple[int, int]]:
+    """What the checks hold against one visual's mesh on its own, as the LOD step
+    compares a coarser level with the finer one (geometry.lod.Verdict): its error
+    codes, and its (non-manifold, inconsistently wound) edge counts when it has either
+    finding, else (0, 0). `memo`: see mesh_findings."""
+    found = mesh_findings(mesh, "", memo=memo)
+    errors = frozenset(f.code for f in found if f.severity == "error")
+    edges = edge_defect_counts(mesh) if any(f.code in ("GEOM003", "GEOM004") for f in found) else (0, 0)
+    return errors, edges
 
 
 def _mesh_findings(mesh: ir.Mesh, site: str, collision: bool) -> list[Finding]:

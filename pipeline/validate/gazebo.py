@@ -227,10 +227,11 @@ def compare_model_bounds(site: str, probed: list, expected: list, slack_m: float
 def world_findings(site: str, figures: dict) -> list[Finding]:
     """sdformat's errors and the parse budget of a world."""
     out = [finding("GZ007", site, f"sdformat: {message}") for message in figures.get("errors", [])]
-    peak, seconds = float(figures["peak_rss_mb"]), float(figures["parse_s"])
-    if peak > WORLD_PARSE_BUDGET_MB or seconds > WORLD_PARSE_BUDGET_S:
-        out.append(finding("GZ008", site, f"parsing the world takes {seconds:.1f} s and {peak:.0f} MB"
-                           f" (budget {WORLD_PARSE_BUDGET_S:.0f} s, {WORLD_PARSE_BUDGET_MB:.0f} MB)"))
+    # memory, not time: the parse time follows the machine's load (bench reports it)
+    peak = float(figures["peak_rss_mb"])
+    if peak > WORLD_PARSE_BUDGET_MB:
+        out.append(finding("GZ008", site, f"parsing the world takes {peak:.0f} MB (budget {WORLD_PARSE_BUDGET_MB:.0f} MB;"
+                           f" {figures['parse_s']:.1f} s on this machine now)"))
     return out
 
 
