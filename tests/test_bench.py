@@ -79,6 +79,11 @@ def test_repeated_and_unique_plans(tmp_path):
     uniq, chosen = plans.unique_assets(src, tmp_path / "uniq", 1)
     site = config.load_site(uniq / "site.toml")
     assert [p.asset_id for p in read_floorplan(site.root / site.floorplan).placements] == chosen == ["kiosk"]
+    scale = plans.at_scale(src, tmp_path / "scale", 20, 7)
+    site = config.load_site(scale / "site.toml")
+    placed = read_floorplan(site.root / site.floorplan).placements
+    assert len(placed) == 20 and len({(p.x, p.y) for p in placed if "-P" in p.tag}) == 1
+    assert sum("-P" in p.tag for p in placed) == 7 and {p.level for p in placed if "-P" in p.tag} == {"L1"}
     before = (rep / "floorplan" / "plan.dxf").read_bytes()
     plans.salt_plan(rep / "floorplan" / "plan.dxf", "x")
     assert (rep / "floorplan" / "plan.dxf").read_bytes() != before

@@ -20,6 +20,9 @@ sampled peak of the whole tree's RSS):
   terrain and scene work grows;
 - the same cold, no-op and edit measures on the plan with 10x the placements (in quick
   mode 2x, and no 1-core cold build), from an empty build folder and cache;
+- the scale run: `twin build` and `twin validate` of a plan drawn as real site plans
+  are (plans.at_scale: 5,000 placements, 1,089 of them on one insertion point), assets
+  from the cache; the sizes of the reports and of placements.json;
 - unique assets: cold builds of plans placing 1..n different assets once each.
 """
 
@@ -40,6 +43,9 @@ from .measure import run_measured
 from .stats import repeat, summarize, summarize_values
 
 EDIT_PREFERENCE = ("circuit_breaker", "kiosk")  # a mid-sized .blend asset; the mini sources' STL
+# The scale run's plan: about the size of a real 500 kV site, with about a fifth of its
+# devices inserted at one point, as that site's drawing had them.
+SCALE_PLACEMENTS, SCALE_PILED = 5000, 1089
 
 
 class BuildFailed(RuntimeError):
@@ -295,6 +301,24 @@ def placements(ctx: Context, sources: Path, built: Path, multiples: list[int], r
     return out
 
 
+def scale_run(ctx: Context, sources: Path, built: Path, placements: int, piled: int) -> dict:
+    """Build and validate plans.at_scale in `built` (the sample's build folder, so the
+    assets come from the cache), then build the sample again there."""
+    variant = plans.at_scale(sources, ctx.work / "scale", placements, piled)
+    build = run_build(ctx, variant, built, 2, "scale")
+    cmd = [sys.executable, "-m", "pipeline.cli", "validate", "--sources", str(variant), "--out", str(built)]
+    check = run_measured(cmd, ctx.work / "logs" / "scale_validate")
+    if check["returncode"] not in (0, 1):  # 1: the report holds errors
+        raise BuildFailed(f"twin validate (scale) exited {check['returncode']}")
+    reports = built / "reports"
+    summary = json.loads((reports / "validation.json").read_text())["summary"]
+    sizes = {name: (reports / name).stat().st_size for name in ("validation.json", "validation.html", "junit.xml")}
+    sizes["placements.json"] = (built / "scene" / "placements.json").stat().st_size
+    run_build(ctx, sources, built, 2, "scale_restore")
+    return {"placements": placements, "piled": piled, "build": build, "validate": check, "bytes": sizes,
+            "errors": summary["errors"], "warnings": summary["warnings"], "by_code": summary["by_code"]}
+
+
 def large_plan(ctx: Context, sources: Path, multiple: int, min_r: int, max_r: int, budget: float) -> dict:
     """The build measures of the sample again on a plan with `multiple` times its
     placements (the same assets): cold builds with 1 and 2 cores from an empty build
@@ -351,6 +375,7 @@ def build_section(ctx: Context) -> dict:
     data["every_asset_geometry_edit"] = every_asset_geometry_edit(ctx, sources, built, data["cold_j2"]["time"]["median_s"])
     multiples = ctx.pick([1, 2], [1, 2, 5, 10])
     data["placements"] = placements(ctx, sources, built, multiples, ctx.pick(1, 3), ctx.pick(0.0, 60.0))
+    data["scale"] = scale_run(ctx, sources, built, ctx.pick(30, SCALE_PLACEMENTS), ctx.pick(10, SCALE_PILED))
     ctx.shared["built_sources"] = ctx.shared.get("scene_sources", sources)
     data["large_plan"] = large_plan(ctx, sources, max(multiples), 1, ctx.pick(1, 2), ctx.pick(0.0, 30.0))
     counts = ctx.pick([1], sorted({1, min(4, len(used))}))
@@ -400,6 +425,7 @@ def targets(d: dict) -> list[dict]:
         ("peak memory under 4 GB (whole tree, sampled sum)", tree / 1e9, 4.0, "GB"),
     ]
     rows += _large_plan_rows(d["large_plan"], cold2)
+    rows.append(_scale_row(d["scale"]))
     return [{"target": t, "value": float(v), "limit": lim, "unit": u, "met": bool(v <= lim)} for t, v, lim, u in rows]
 
 
@@ -425,6 +451,14 @@ def _large_plan_rows(large: dict, sample_cold: float) -> list[tuple]:
     return rows
 
 
+def _scale_row(scale: dict) -> tuple:
+    reports = sum(v for k, v in scale["bytes"].items() if k != "placements.json")
+    return (f"{scale['placements']:,} placements ({scale['piled']:,} on one point): twin validate under 60 s "
+            f"(build {scale['build']['seconds']:.1f} s; reports {reports / 1e6:.2f} MB, placements.json "
+            f"{scale['bytes']['placements.json'] / 1e6:.2f} MB; {scale['errors']:,} errors, "
+            f"{scale['warnings']:,} warnings)", scale["validate"]["seconds"], 60.0, "s")
+
+
 def _all_series(d: dict):
     yield d["cold_j2"]
     yield d["cold_j1"]
@@ -436,6 +470,7 @@ def _all_series(d: dict):
     yield d["every_asset_geometry_edit"]
     yield from d["placements"].values()
     yield from d["unique_assets"].values()
+    yield {"runs": [d["scale"]["build"]]}
     large = d["large_plan"]
     yield from (large[k] for k in ("cold_j2", "cold_j1", "noop", "one_asset_edit", "one_asset_geometry_edit",
                                            "one_asset_source_edit") if large[k])

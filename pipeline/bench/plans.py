@@ -6,6 +6,9 @@
   original's, so asset task keys (which hash the resolved asset paths' content) are
   unchanged and a shared build folder rebuilds only terrain and scene.
 - unique_assets: one INSERT of each of the first n placed asset kinds, nothing else.
+- at_scale: a plan of a given number of placements as real site plans are drawn: the
+  layout repeated as above, and a share of the INSERTs piled on one insertion point
+  (blocks whose base point is not the device's own stack up where they were inserted).
 
 A `salt` adds one TEXT entity (the reader counts and ignores it) so the plan's hash
 changes and the scene work really reruns on each repeat instead of coming from the cache.
@@ -87,6 +90,41 @@ def repeated(src: Path, dst: Path, copies: int) -> Path:
             msp.add_entity(c)
     doc.saveas(dst_plan)
     return Path(dst)
+
+
+def at_scale(src: Path, dst: Path, placements: int, piled: int) -> Path:
+    """Sources with exactly `placements` INSERTs: src's layout repeated (the last copy
+    cut short), `piled` of them copies of src's INSERTs (in turn) all inserted at its
+    first INSERT's point and level, tags suffixed -P<k>."""
+    import ezdxf
+
+    per_copy = _insert_count(Path(src))
+    laid = placements - piled
+    repeated(src, dst, math.ceil(laid / per_copy))
+    plan = Path(dst) / _site_floorplan(dst)
+    doc = ezdxf.readfile(plan)
+    msp = doc.modelspace()
+    inserts = list(msp.query("INSERT"))
+    for e in inserts[laid:]:
+        msp.delete_entity(e)
+    spot, level = inserts[0].dxf.insert, inserts[0].get_attrib_text("LEVEL")
+    for k in range(piled):
+        c = inserts[k % per_copy].copy()
+        c.translate(*(spot - c.dxf.insert))
+        for a in c.attribs:
+            if a.dxf.tag.upper() == "TAG":
+                a.dxf.text = f"{a.dxf.text}-P{k}"
+            elif a.dxf.tag.upper() == "LEVEL":
+                a.dxf.text = level
+        msp.add_entity(c)
+    doc.saveas(plan)
+    return Path(dst)
+
+
+def _insert_count(sources: Path) -> int:
+    import ezdxf
+
+    return len(ezdxf.readfile(sources / _site_floorplan(sources)).modelspace().query("INSERT"))
 
 
 def unique_assets(src: Path, dst: Path, count: int) -> tuple[Path, list[str]]:
