@@ -81,7 +81,7 @@ def test_a_task_that_may_stand_on_a_failed_dependencys_last_outputs(src, tmp_pat
 
     def graph(fail: bool) -> list:
         g = _graph(src, out, **({"upper_b": toy_graph.refuse} if fail else {}))
-        g[-1].previous_ok = True
+        g[-1].previous_ok = ("upper:b",)
         return g
 
     cold = Scheduler(out).run(graph(fail=True))
@@ -96,6 +96,12 @@ def test_a_task_that_may_stand_on_a_failed_dependencys_last_outputs(src, tmp_pat
     r = Scheduler(out).run(graph(fail=True))
     assert sorted(r.ran) == ["join", "upper:a", "upper:b"] and _why(r)["join"]["previous_of"] == ["upper:b"]
     assert (out / "joined.txt").read_text() == "ALPHA, EDITED+BETA"
+
+    # only on the dependencies it names: a failed upper:a blocks it
+    (src / "a.txt").write_text("alpha, broken")
+    g = graph(fail=True)
+    g[0].action = toy_graph.refuse
+    assert Scheduler(out).run(g).blocked == {"join": ["upper:a"]}
 
     (out / "up" / "b.txt").unlink()  # its last outputs are no longer all there: nothing to stand on
     (src / "a.txt").write_text("alpha, edited again")

@@ -119,9 +119,9 @@ class Task:
              outputs into the staging folder it is given and returns a JSON-able dict.
     problem: why the task cannot run, found by the planner (a UserError): the build
              reports it as the task's failure without running it.
-    previous_ok: when a dependency fails, the task runs on what that dependency's
-             last success left in the build folder (if all of it is in place)
-             instead of being blocked.
+    previous_ok: dependencies whose failure does not block the task: it runs on
+             what such a dependency's last success left in the build folder (if
+             all of it is in place) instead.
     """
 
     name: str
@@ -136,7 +136,7 @@ class Task:
     cost: float = 0.0  # expected work (any unit): longer tasks start first; not in the key
     warm: tuple[str, ...] = ()  # modules to import ahead in an idle worker; not in the key
     problem: Exception | None = None  # the planner's reason the task cannot run
-    previous_ok: bool = False  # runs on a failed dependency's last good outputs
+    previous_ok: tuple[str, ...] = ()  # deps whose last good outputs stand in when they fail
     key: str = ""
     input_hashes: dict[str, str] = field(default_factory=dict)
 

@@ -307,14 +307,12 @@ class Scheduler:
     def _stand_in(self, task: Task, broken: dict[str, list[str]], state: dict,
                   digests: dict[str, str]) -> tuple[list[str], list[str]]:
         """(the failed dependencies whose last good outputs `task` runs on, those it is
-        blocked by): a task stands on none unless Task.previous_ok, and on none whose
-        last outputs are not all in place. Those it stands on enter its key as the last
-        build recorded them, so a scene made from them before is still up to date."""
+        blocked by): it stands on those Task.previous_ok names whose last outputs are
+        all in place. Those enter its key as the last build recorded them, so a scene
+        made from them before is still up to date."""
         failed = [d for d in task.deps if d in broken]
-        if not failed or not task.previous_ok:
-            return [], failed
         last = {d: state["tasks"].get(d) for d in failed}
-        missing = [d for d, entry in last.items() if not entry or "digest" not in entry
+        missing = [d for d, entry in last.items() if d not in task.previous_ok or not entry or "digest" not in entry
                    or not all((self.build / rel).is_file() for rel in entry.get("files", []))]
         if missing:
             return [], missing

@@ -39,6 +39,7 @@ from .graph import Task, code_version
 from .layout import IR_FOLDER, SOURCE_FOLDER
 from .package_task import WARM as PACKAGE_WARM, build_asset
 from .source_task import build_source
+from .viewer_task import viewer_tasks
 
 SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
                "pipeline.ingest.mesh", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.spare",
@@ -237,6 +238,8 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
     if not only:
         require_placements_and_platforms(p.floorplan)
         p.tasks.extend(scene_tasks(p, Path(sources), Path(build)))
+        placed = sorted({pl.asset_id for pl in p.floorplan.placements})
+        p.tasks.extend(viewer_tasks(p.site, Path(sources), Path(build), placed, memo))
     return p
 
 
@@ -252,9 +255,11 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     terrain = Task(name="terrain", stage="terrain", action=build_terrain, args=args, inputs=inputs,
                    params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
     placed_assets = sorted({pl.asset_id for pl in p.floorplan.placements})
+    packages = tuple(f"asset:{a}" for a in placed_assets)
     # a placed asset that fails in this build is placed from its last package, so one
-    # broken source does not hold back every other asset's changes
+    # broken source does not hold back every other asset's changes; a failed terrain
+    # (the ground every placement stands on) blocks the scene
     scene = Task(name="scene", stage="scene", action=build_scene, args=args, inputs=inputs,
-                 deps=("terrain", *(f"asset:{a}" for a in placed_assets)),
-                 params={"site": site.name}, code=code, outputs=("scene/",), warm=SCENE_WARM, previous_ok=True)
+                 deps=("terrain", *packages), params={"site": site.name}, code=code, outputs=("scene/",),
+                 warm=SCENE_WARM, previous_ok=packages)
     return [terrain, scene]
