@@ -145,6 +145,38 @@ def render(scenario: Path | None, study: bool, out: Path):
 
 
 @main.command()
+@OUT
+@click.option("--port", type=click.IntRange(0, 65535), default=8000, show_default=True,
+              help="port on 127.0.0.1 (0: any free one)")
+@user_errors
+def view(out: Path, port: int):
+    """Serve OUT on 127.0.0.1 for the web viewer (OUT/viewer/index.html) and the globe."""
+    from .viewer.serve import address, server
+
+    page = out / "viewer" / "index.html"
+    if not page.is_file():
+        raise UserError(page, None, "no viewer in this build folder: run `twin build` first")
+    missing = sorted(p.parent.name for p in (out / "viewer" / "lib").glob("*/MISSING.txt"))
+    if missing:
+        click.echo(f"warning: built without {', '.join(missing)}: bash .ci/install-tools, then twin build", err=True)
+    try:
+        srv = server(out, port)
+    except OSError as e:
+        raise UserError(out, None, f"cannot serve on 127.0.0.1:{port}: {e.strerror} (try --port 0)") from None
+    url = address(srv)
+    click.echo(f"viewer: {url}viewer/index.html")
+    click.echo(f"globe:  {url}viewer/globe.html")
+    click.echo("Ctrl-C stops the server")
+    sys.stdout.flush()  # the address, before serving, also when piped
+    try:
+        srv.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        srv.server_close()
+
+
+@main.command()
 @SOURCES
 @OUT
 @click.option("--quick", is_flag=True, help="fewer repeats and sizes (for tests)")

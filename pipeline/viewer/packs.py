@@ -1,0 +1,245 @@
+"""One model at one LOD level as the tiles store it: a "pack".
+
+A pack is the model's visuals at that level baked into the model frame (each visual's
+node transform applied to its vertices, the default morph weights applied) and merged
+into one primitive per material, so a tile draws a placed model with one instanced
+node and as few draw calls as it has materials. Its vertex data is one binary file
+that every tile showing the model at that level references (glTF external buffers),
+so a tileset stores each mesh once however many tiles place it.
+
+Layout: `Pack.binary` holds, per merged primitive, its indices then its attributes,
+each at a 4-byte boundary; `views` and `accessors` index into it (the tile gives the
+views their buffer), `primitives` reference those accessors and the pack's own
+`materials`, textures, images and samplers (images are stored in the binary too).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..scene.scene_gltf import Z_TO_Y, lod_meshes, visual_nodes
+
+_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_KEPT = ("POSITION", "NORMAL", "TEXCOORD_0", "TEXCOORD_1")  # attributes a tile keeps
+_TRIANGLES = 4
+
+
+def accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
+    """An accessor's values as (count, width) or (count,) in its component type
+    (strided views read element by element; sparse accessors are not written by the
+    exporters and are refused)."""
+    acc = doc["accessors"][index]
+    if "sparse" in acc or "bufferView" not in acc:
+        raise ValueError(f"accessor {index}: sparse or without a buffer view")
+    view = doc["bufferViews"][acc["bufferView"]]
+    dtype = np.dtype(_COMPONENTS[acc["componentType"]]).newbyteorder("<")
+    width = _WIDTH[acc["type"]]
+    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    stride = view.get("byteStride", 0)
+    if stride and stride != dtype.itemsize * width:
+        rows = np.ndarray((acc["count"], width), dtype, buffer=binary, offset=start, strides=(stride, dtype.itemsize))
+        arr = np.array(rows)
+    else:
+        arr = np.frombuffer(binary, dtype, acc["count"] * width, start).reshape(acc["count"], width)
+    return arr if width > 1 else arr.reshape(-1)
+
+
+@dataclass
+class Pack:
+    """One model at one level, baked and merged (see the module docstring).
+
+    hull: (h, 3) float64 points of the merged mesh in the model's Z-up frame whose
+    convex hull is the mesh's (the bounding volumes transform these)."""
+
+    asset: str
+    level: int
+    binary: bytes
+    views: list[dict]
+    accessors: list[dict]
+    primitives: list[dict]
+    materials: list[dict]
+    textures: list[dict] = field(default_factory=list)
+    images: list[dict] = field(default_factory=list)
+    samplers: list[dict] = field(default_factory=list)
+    variants: list[str] = field(default_factory=list)
+    hull: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    triangles: int = 0
+
+
+def _baked(doc: dict, binary: bytes, mesh_index: int, matrix: np.ndarray) -> list[dict]:
+    """The triangle primitives of a mesh with `matrix` (Y-up, the visual's global
+    transform) applied: [{"key", "attributes": {name: array}, "indices"}]."""
+    mesh = doc["meshes"][mesh_index]
+    weights = mesh.get("weights") or []
+    m3 = matrix[:3, :3]
+    normal_m = np.linalg.inv(m3).T
+    flip = np.linalg.det(m3) < 0
+    out = []
+    for p in mesh["primitives"]:
+        if p.get("mode", _TRIANGLES) != _TRIANGLES:
+            continue
+        attrs = {name: accessor(doc, binary, i).astype(np.float64) for name, i in sorted(p["attributes"].items())
+                 if name in _KEPT and doc["accessors"][i]["componentType"] == 5126}
+        for w, target in zip(weights, p.get("targets", [])):
+            for name in ("POSITION", "NORMAL"):
+                if w and name in target and name in attrs:
+                    attrs[name] = attrs[name] + w * accessor(doc, binary, target[name])
+        attrs["POSITION"] = attrs["POSITION"] @ m3.T + matrix[:3, 3]
+        if "NORMAL" in attrs:
+            n = attrs["NORMAL"] @ normal_m.T
+            length = np.linalg.norm(n, axis=1, keepdims=True)
+            attrs["NORMAL"] = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+        count = len(attrs["POSITION"])
+        faces = (accessor(doc, binary, p["indices"]) if "indices" in p else np.arange(count)).astype(np.int64)
+        faces = faces[: len(faces) // 3 * 3].reshape(-1, 3)
+        if flip:
+            faces = faces[:, ::-1]
+        mappings = p.get("extensions", {}).get("KHR_materials_variants", {}).get("mappings", [])
+        key = (p.get("material", -1), tuple(sorted(attrs)), json.dumps(mappings, sort_keys=True))
+        out.append({"key": key, "attributes": attrs, "faces": faces, "mappings": mappings})
+    return out
+
+
+def _merged(parts: list[dict]) -> list[dict]:
+    """Primitives of one key concatenated, in the order of first appearance."""
+    groups: dict[tuple, list[dict]] = {}
+    for part in parts:
+        groups.setdefault(part["key"], []).append(part)
+    merged = []
+    for key, members in groups.items():
+        offsets = np.cumsum([0] + [len(m["attributes"]["POSITION"]) for m in members])
+        merged.append({
+            "material": key[0], "mappings": members[0]["mappings"],
+            "attributes": {name: np.concatenate([m["attributes"][name] for m in members]) for name in key[1]},
+            "faces": np.concatenate([m["faces"] + o for m, o in zip(members, offsets)])})
+    return merged
+
+
+class _Writer:
+    """Arrays appended to one binary, each with its view and accessor."""
+
+    def __init__(self):
+        self.binary = bytearray()
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        self.binary += b"\0" * (-len(self.binary) % 4)
+        view = {"byteOffset": len(self.binary), "byteLength": len(data)}
+        if target is not None:
+            view["target"] = target
+        self.binary += data
+        self.views.append(view)
+        return len(self.views) - 1
+
+    def array(self, arr: np.ndarray, kind: str, target: int, bounds: bool = False) -> int:
+        component = {np.dtype("<f4"): 5126, np.dtype("<u4"): 5125, np.dtype("<u2"): 5123}[arr.dtype]
+        acc = {"bufferView": self.view(arr.tobytes(), target), "componentType": component, "count": len(arr),
+               "type": kind}
+        if bounds:
+            acc["min"] = [float(v) for v in arr.min(axis=0)]
+            acc["max"] = [float(v) for v in arr.max(axis=0)]
+        self.accessors.append(acc)
+        return len(self.accessors) - 1
+
+
+def texture_refs(node, out: list[dict]) -> None:
+    """Every {"index": ...} texture reference inside a material, in document order."""
+    if isinstance(node, dict):
+        for k in sorted(node):
+            v = node[k]
+            if k.endswith("Texture") and isinstance(v, dict) and "index" in v:
+                out.append(v)
+            texture_refs(v, out)
+    elif isinstance(node, list):
+        for v in node:
+            texture_refs(v, out)
+
+
+def _copy_materials(pack: Pack, writer: _Writer, doc: dict, binary: bytes, used: list[int]) -> dict[int, int]:
+    """The source materials `used` (indices) into the pack, with the textures, images
+    and samplers they reference (images into the pack's binary); returns source ->
+    pack material index."""
+    textures: dict[int, int] = {}
+    for src in used:
+        mat = json.loads(json.dumps(doc["materials"][src]))
+        refs: list[dict] = []
+        texture_refs(mat, refs)
+        for ref in refs:
+            t = ref["index"]
+            if t not in textures:
+                tex = dict(doc["textures"][t])
+                if "sampler" in tex:
+                    pack.samplers.append(dict(doc["samplers"][tex["sampler"]]))
+                    tex["sampler"] = len(pack.samplers) - 1
+                if "source" in tex:
+                    image = dict(doc["images"][tex["source"]])
+                    if "bufferView" in image:
+                        view = doc["bufferViews"][image["bufferView"]]
+                        start = view.get("byteOffset", 0)
+                        image["bufferView"] = writer.view(binary[start: start + view["byteLength"]])
+                    pack.images.append(image)
+                    tex["source"] = len(pack.images) - 1
+                pack.textures.append(tex)
+                textures[t] = len(pack.textures) - 1
+            ref["index"] = textures[t]
+        pack.materials.append(mat)
+    return {src: i for i, src in enumerate(used)}
+
+
+def _hull_points(points: np.ndarray) -> np.ndarray:
+    """The points whose convex hull is that of `points` (n, 3): the hull's vertices,
+    or every point where the hull is flat."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    if len(points) < 5:
+        return points
+    try:
+        return points[ConvexHull(points).vertices]
+    except (QhullError, ValueError):
+        return np.unique(points, axis=0)
+
+
+def make_pack(asset: str, level: int, doc: dict, binary: bytes) -> Pack:
+    """The model glb (`doc`, `binary`: export.gltf's layout, MSFT_lod chains on its
+    visual nodes) at `level` (a visual with a shorter chain shows its coarsest)."""
+    parts = []
+    for ni, matrix in visual_nodes(doc):
+        chain = lod_meshes(doc, ni)
+        parts += _baked(doc, binary, chain[min(level, len(chain) - 1)], matrix)
+    merged = _merged(parts)
+    writer = _Writer()
+    pack = Pack(asset, level, b"", [], [], [], [])
+    src_materials = sorted({m["material"] for m in merged if m["material"] >= 0}
+                           | {mp["material"] for m in merged for mp in m["mappings"]})
+    material_index = _copy_materials(pack, writer, doc, binary, src_materials)
+    names = [v["name"] for v in doc.get("extensions", {}).get("KHR_materials_variants", {}).get("variants", [])]
+    points = []
+    for m in merged:
+        pos = m["attributes"]["POSITION"]
+        faces = m["faces"]
+        index_type = "<u2" if len(pos) < 65536 else "<u4"
+        prim = {"indices": writer.array(faces.reshape(-1).astype(index_type), "SCALAR", 34963), "mode": _TRIANGLES,
+                "attributes": {}}
+        for name in sorted(m["attributes"]):
+            arr = m["attributes"][name].astype("<f4")
+            prim["attributes"][name] = writer.array(arr, "VEC3" if arr.shape[1] == 3 else "VEC2", 34962,
+                                                    bounds=name == "POSITION")
+            if name == "POSITION":
+                points.append(arr.astype(np.float64))  # as stored: the bounds enclose what is drawn
+        if m["material"] >= 0:
+            prim["material"] = material_index[m["material"]]
+        if m["mappings"]:
+            prim["mappings"] = [{"material": material_index[mp["material"]],
+                                 "variants": [names[v] for v in mp["variants"]]} for mp in m["mappings"]]
+            pack.variants += [names[v] for mp in m["mappings"] for v in mp["variants"] if names[v] not in pack.variants]
+        pack.primitives.append(prim)
+        pack.triangles += len(faces)
+    y_to_z = Z_TO_Y[:3, :3].T
+    pack.hull = _hull_points(np.concatenate(points) @ y_to_z.T) if points else np.zeros((0, 3))
+    pack.binary, pack.views, pack.accessors = bytes(writer.binary), writer.views, writer.accessors
+    return pack
