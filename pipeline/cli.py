@@ -64,13 +64,16 @@ def info(sources: Path):
 @click.option("--cache-limit", default="2G", show_default=True, metavar="SIZE",
               help="after a build that stored something, drop the least recently used cache entries "
                    "above this size (e.g. 500M; 0 keeps only this build's; 'none' keeps all)")
+@click.option("--memory-limit", default="auto", show_default=True, metavar="SIZE",
+              help="address space each worker process may use (e.g. 8G; 'auto': its share of the machine's "
+                   "memory, at least 4G; 'none': no limit); a task that needs more fails on its own")
 @click.option("--explain", is_flag=True, help="say for each task why it ran or was skipped")
 @click.option("--json", "as_json", is_flag=True, help="print the explanation as JSON on stdout")
 @click.option("--executor", type=click.Choice(sorted(EXECUTORS)), default="local", show_default=True,
               help="where tasks run: worker processes, or this one (for a debugger or profiler)")
 @user_errors
 def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cache: Path | None,
-          cache_limit: str, explain: bool, as_json: bool, executor: str):
+          cache_limit: str, memory_limit: str, explain: bool, as_json: bool, executor: str):
     """Build the model packages and the scene."""
     from .builder.cache import parse_size
     from .builder.run import build as run_build, failure_lines
@@ -79,8 +82,14 @@ def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cac
         limit = None if cache_limit.strip().lower() == "none" else parse_size(cache_limit)
     except ValueError:
         raise click.BadParameter(f"{cache_limit!r} is not a size (like 500M or 2G)", param_hint="--cache-limit")
+    memory = memory_limit.strip().lower()
+    try:
+        memory = None if memory == "none" else memory if memory == "auto" else parse_size(memory)
+    except ValueError:
+        raise click.BadParameter(f"{memory_limit!r} is not a size (like 8G), auto or none",
+                                 param_hint="--memory-limit")
     report = run_build(sources, out, jobs=jobs, only=list(only), cache=cache, quiet=as_json,
-                       executor=EXECUTORS[executor], cache_limit=limit)
+                       executor=EXECUTORS[executor], cache_limit=limit, memory_limit=memory)
     # how long each task that ran took in its worker (the build files carry no timings)
     tasks = [{**e, "seconds": round(report.timings[e["task"]], 4)} if e["task"] in report.timings else e
              for e in report.explanations]

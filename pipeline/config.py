@@ -329,21 +329,26 @@ def _numbers(data: Any, prefix: str = ""):
 
 @dataclass(frozen=True)
 class AssetConfig:
-    """asset.toml of sources/assets/<id>/, validated, with defaults filled in."""
+    """asset.toml of sources/assets/<id>/, validated, with defaults filled in.
+
+    units, up_axis: None when asset.toml leaves them to the source file (the readers
+    take the file's own); scale multiplies after units."""
 
     path: Path
     id: str
     category: str
     description: str
     source: Path
-    units: str
-    up_axis: str
+    units: str | None
+    up_axis: str | None
     tessellation_tolerance_m: float
     triangle_budget: int
     mass_kg: float
     lod_budgets_m: tuple[float, ...]
     collision_mode: str
     bindings: tuple[dict, ...]
+    scale: float = 1.0
+    tessellation_max_triangles: int = 1_000_000
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -384,9 +389,11 @@ def load_asset_config(path: Path, passed: PassedChecks | None = None) -> AssetCo
         category=data["category"],
         description=data.get("description", ""),
         source=source,
-        units=data["units"],
-        up_axis=data["up_axis"],
+        units=data.get("units"),
+        up_axis=data.get("up_axis"),
+        scale=float(data["scale"]),
         tessellation_tolerance_m=float(data["tessellation_tolerance_m"]),
+        tessellation_max_triangles=int(data["tessellation_max_triangles"]),
         triangle_budget=int(data["triangle_budget"]),
         mass_kg=float(data["mass_kg"]),
         lod_budgets_m=budgets,

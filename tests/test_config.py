@@ -78,7 +78,9 @@ def asset_dir(tmp_path, name="post", toml='category = "insulator"\nsource = "pos
 
 def test_asset_config_defaults(tmp_path):
     cfg = config.load_asset_config(asset_dir(tmp_path))
-    assert cfg.id == "post" and cfg.units == "m" and cfg.up_axis == "Z"
+    # units and up axis left to the file; scale 1 and the tessellation guard by default
+    assert cfg.id == "post" and cfg.units is None and cfg.up_axis is None and cfg.scale == 1.0
+    assert cfg.tessellation_max_triangles == 1_000_000
     assert cfg.lod_budgets_m == (0.005, 0.02, 0.08)
     assert cfg.collision_mode == "hull_per_link"
 
@@ -86,6 +88,9 @@ def test_asset_config_defaults(tmp_path):
 @pytest.mark.parametrize("toml, key", [
     ('source = "post.stl"\n', "category"),
     ('category = "insulator"\nsource = "post.stl"\nunits = "inch"\n', "units"),
+    ('category = "insulator"\nsource = "post.stl"\nscale = 0\n', "scale"),
+    ('category = "insulator"\nsource = "post.stl"\nup_axis = "-Y"\n', "up_axis"),
+    ('category = "insulator"\nsource = "post.stl"\ntessellation_max_triangles = 0\n', "tessellation_max_triangles"),
     ('category = "insulator"\nsource = "../../etc/passwd.stl"\n', "source"),
     ('category = "insulator"\nsource = "missing.stl"\n', "source"),
     ('category = "insulator"\nsource = "post.stl"\n[lod]\nbudgets_m = [0.1, 0.01]\n', "lod.budgets_m"),

@@ -253,7 +253,9 @@ def test_mass_is_split_and_deterministic(fx, full):
     again = read_blend_path(fx / "full.blend", "full", "test", mass_kg=50.0)
     for a, b in zip(full.visuals(), again.visuals()):
         assert a[1].name == b[1].name and np.array_equal(a[1].mesh.vertices, b[1].mesh.vertices)
-    assert full.metadata == again.metadata == (("source_format", "blend"),)
+    assert full.metadata == again.metadata == (
+        ("source_format", "blend"),
+        ("notes", "level: shape key values full=0.7 left to its shape binding (the rest mesh is the reference key)"))
 
 
 @pytest.mark.blender

@@ -13,9 +13,10 @@ from pipeline.ingest.cad import read_cad
 from pipeline.ingest.mesh import read_mesh
 
 
-def cfg(path, units="m", up="Z", tol=0.001):
+def cfg(path, units=None, up=None, tol=0.001, scale=1.0, max_triangles=1_000_000):
+    """What load_asset_config gives the readers; None leaves units and up axis to the file."""
     return SimpleNamespace(id="x", category="c", description="", source=Path(path), units=units, up_axis=up,
-                           tessellation_tolerance_m=tol)
+                           scale=scale, tessellation_tolerance_m=tol, tessellation_max_triangles=max_triangles)
 
 
 def step_box_mm_yup(path):

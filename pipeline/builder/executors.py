@@ -37,11 +37,38 @@ class Workers:
 
     count:   tasks in flight at once (the scheduler never submits more);
     threads: cores each task may use for native thread pools and spare.beside;
-    cpus:    CPUs to hold the workers to, empty for no affinity."""
+    cpus:    CPUs to hold the workers to, empty for no affinity;
+    memory:  bytes of address space each worker may map (RLIMIT_AS), None for no
+             limit: a task that needs more fails with MemoryError, which is its own
+             failure, before the kernel's out-of-memory killer picks a process."""
 
     count: int
     threads: int
     cpus: tuple[int, ...] = ()
+    memory: int | None = None
+
+
+# a worker's address space holds far more than it touches (Blender, USD, thread
+# stacks and malloc arenas reserve without using): never less than this
+MIN_MEMORY = 4 << 30
+
+
+def default_memory(count: int) -> int:
+    """Each of `count` workers' share of the machine's physical memory, at least
+    MIN_MEMORY."""
+    try:
+        physical = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError):
+        return MIN_MEMORY
+    return max(MIN_MEMORY, physical // max(1, count))
+
+
+def memory_limit() -> int | None:
+    """This process's address-space limit in bytes, None when there is none."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY else soft
 
 
 ExecutorFactory = Callable[[Workers], Executor]
@@ -67,7 +94,9 @@ def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict
     except MemoryError:
         # an allocation refused under the task's memory limit: the task fails, the
         # worker lives on (what it held is freed with the frames of the action)
-        return {"ok": False, "error": "ran out of memory", "kind": "memory"}
+        limit = memory_limit()
+        within = f" (its limit: {limit / 2**30:.1f} GB, twin build --memory-limit)" if limit else ""
+        return {"ok": False, "error": f"ran out of memory{within}", "kind": "memory"}
     except (Exception, SystemExit) as e:  # a task that exits ends itself, not the build
         return {"ok": False, "error": f"{type(e).__name__}: {e}", "trace": traceback.format_exc()}
     finally:
@@ -109,7 +138,7 @@ def local_pool(workers: Workers) -> Executor:
     context = multiprocessing.get_context("spawn")
     slots = context.Value("i", 0)  # each worker takes the next: the CPU it keeps to on a one-core task
     return ProcessPoolExecutor(max_workers=workers.count, mp_context=context, initializer=init_worker,
-                               initargs=(workers.threads, workers.cpus, slots))
+                               initargs=(workers.threads, workers.cpus, slots, workers.memory))
 
 
 # In a pool worker: the CPUs of the build, and the one this worker keeps to when its
@@ -120,16 +149,24 @@ _OWN_CPU: int | None = None
 _EXIT_FIRST = False
 
 
-def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None) -> None:
+def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: int | None = None) -> None:
     """Worker initializer. Each worker's native thread pools get its share of the cores
     (N workers each running as many threads as there are cores only trade places);
     a variable the user set is kept. `cpus`: the CPUs a build given fewer cores than
     the machine is held to (fcpw starts a thread per core it sees, whatever the
     variables say). `slots`: a shared counter from which the worker takes the CPU it
-    keeps to while its task has a single core (see _hold_to). bpy is imported by the
-    first read of a .blend in a worker, not here: a worker that reads none (the
-    source, geometry and package tasks of an edit's chain) never pays its 0.45 s."""
+    keeps to while its task has a single core (see _hold_to). `memory`: the worker's
+    address-space limit (Workers.memory), inherited by the processes its tasks start.
+    bpy is imported by the first read of a .blend in a worker, not here: a worker that
+    reads none (the source, geometry and package tasks of an edit's chain) never pays
+    its 0.45 s."""
     global _CPUS, _OWN_CPU, _EXIT_FIRST
+    if memory is not None:
+        import resource
+
+        _, hard = resource.getrlimit(resource.RLIMIT_AS)
+        limit = memory if hard == resource.RLIM_INFINITY else min(memory, hard)
+        resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
     if cpus:
         os.sched_setaffinity(0, cpus)
     if slots is not None and hasattr(os, "sched_getaffinity"):

@@ -13,12 +13,15 @@ from .tasks import plan
 
 def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] | None = None,
           cache: Path | None = None, quiet: bool = False, executor: ExecutorFactory = local_pool,
-          cache_limit: int | None = DEFAULT_LIMIT) -> BuildReport:
+          cache_limit: int | None = DEFAULT_LIMIT, memory_limit: int | str | None = "auto") -> BuildReport:
+    """`memory_limit`: each worker's address space in bytes, "auto" (its share of the
+    machine) or None (no limit)."""
     p = plan(Path(sources), Path(out), only=only or None, cache=cache)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     if quiet:  # nothing to show: rich is not even imported (a quarter of a no-op's imports)
-        return Scheduler(out, cache=cache, jobs=jobs, executor=executor, cache_limit=cache_limit).run(p.tasks)
+        return Scheduler(out, cache=cache, jobs=jobs, executor=executor, cache_limit=cache_limit,
+                         memory_limit=memory_limit).run(p.tasks)
     from rich.console import Console
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
@@ -29,7 +32,7 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as progress:
         bars = {s: progress.add_task(s, total=sum(t.stage == s for t in p.tasks)) for s in stages}
         scheduler = Scheduler(out, cache=cache, jobs=jobs, progress=lambda t: progress.advance(bars[t.stage]),
-                              executor=executor, cache_limit=cache_limit)
+                              executor=executor, cache_limit=cache_limit, memory_limit=memory_limit)
         report = scheduler.run(p.tasks)
     if report.cache.get("removed"):
         console.print(f"cache: dropped {report.cache['removed']} least recently used entries "
@@ -38,7 +41,19 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
         console.print(f"not built (no placement or scenario uses them): {', '.join(p.unused)}")
     for warning in p.floorplan.warnings:
         console.print(f"floor plan: {warning}", markup=False)  # the messages name [floorplan] keys
+    for line in source_warnings(report):
+        console.print(line, markup=False)
     return report
+
+
+def source_warnings(report: BuildReport) -> list[str]:
+    """What the readers could not carry (source task results' "warnings", kept for a
+    task that did not rerun), a line each: `<asset>: warning: <message>`."""
+    lines = []
+    for name, result in sorted(report.results.items()):
+        if name.startswith("source:"):
+            lines += [f"{name.removeprefix('source:')}: warning: {w}" for w in result.get("warnings", [])]
+    return lines
 
 
 def failure_lines(report: BuildReport, traces: bool = False) -> list[str]:

@@ -31,7 +31,7 @@ from pathlib import Path
 
 from ..errors import UserError
 from .cache import DEFAULT_LIMIT, Cache, cache_root
-from .executors import ExecutorFactory, Workers, local_pool, run_task, warm_up
+from .executors import ExecutorFactory, Workers, default_memory, local_pool, run_task, warm_up
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
 STATE_FILE = ".state.json"
@@ -82,12 +82,15 @@ class BuildLock:
 
 class Scheduler:
     def __init__(self, build: Path, cache: Path | None = None, jobs: int | None = None, progress=None,
-                 executor: ExecutorFactory = local_pool, cache_limit: int | None = DEFAULT_LIMIT):
+                 executor: ExecutorFactory = local_pool, cache_limit: int | None = DEFAULT_LIMIT,
+                 memory_limit: int | str | None = None):
         self.build = Path(build)
         self.executor = executor
         self.cache = Cache(cache_root(self.build, cache))
         self.cache_limit = cache_limit  # bytes kept after a build that stored something (None: all)
         self.jobs = max(1, jobs or os.cpu_count() or 1)
+        # each worker's address space in bytes (Workers.memory); "auto": its share of the machine
+        self.memory_limit = default_memory(self.jobs) if memory_limit == "auto" else memory_limit
         # `jobs` is the build's share of the machine: at most that many cores busy, so
         # `--jobs 1` is one core (a shared CI runner's cap), not one worker with threads
         self.cores = max(1, min(self.jobs, os.cpu_count() or 1))
@@ -234,7 +237,7 @@ class Scheduler:
                         if pool is None:
                             if threads is None:
                                 threads = self._worker_setup(order, state, hasher)
-                            pool = self.executor(Workers(self.jobs, threads, self._cpus()))
+                            pool = self.executor(Workers(self.jobs, threads, self._cpus(), self.memory_limit))
                         staging = self.build / ".staging" / task.key
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)

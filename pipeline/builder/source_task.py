@@ -58,4 +58,5 @@ def build_source(staging: Path, asset_toml: str) -> dict:
     out.parent.mkdir(parents=True, exist_ok=True)
     irfile.write(out, asset, {"source_findings": as_dicts(source_findings),
                               "source_triangles": source.triangle_count(0)})
-    return {"asset": cfg.id, "timings": timings}
+    warnings = [message for key, message in source.metadata if key.startswith("warning.")]
+    return {"asset": cfg.id, "timings": timings, **({"warnings": warnings} if warnings else {})}

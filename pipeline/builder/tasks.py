@@ -42,7 +42,8 @@ from .source_task import build_source
 from .viewer_task import viewer_tasks
 
 SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
-               "pipeline.ingest.mesh", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.spare",
+               "pipeline.ingest.mesh", "pipeline.ingest.units", "pipeline.ingest.gltf_file",
+               "pipeline.ingest.tessellate", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.spare",
                "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.source_task")
 GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.validate.checks", "pipeline.spare",
                  "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.geometry_task")

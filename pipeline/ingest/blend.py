@@ -26,7 +26,26 @@ What becomes what:
   the rest of the object's matrix (scale, shear, mirror) is baked into the vertices,
   and a mirrored object gets its winding reversed so faces stay outward;
 - normals are left None (writers compute smooth ones); UVs come from the active UV
-  layer, vertices being split where corners disagree.
+  layer, vertices being split where corners disagree;
+- shape keys: each key is the shape with that key alone at full weight (reference +
+  key - its own reference). The rest mesh is the mix the file shows (each key at its
+  saved value), so every writer shows what the modeller saw; except on an object a
+  `shape` binding drives (in the file or asset.toml): there the binding sets the
+  weights, the saved values were a preview, and the rest mesh is the reference key.
+  The notes say which values made a rest mesh and which were left to a binding.
+
+What the IR does not carry is said, one warning each in the metadata (`warning.<what>`,
+validate.checks SRC001), never dropped silently:
+- armatures: every armature is put in its rest pose before anything is evaluated, so
+  meshes it deforms or carries (bone parents) are read at rest, never at the frame of
+  an action the file was saved in;
+- animation: actions are not carried; objects are read as the file shows them at its
+  current frame (armatures at rest);
+- a file saved by a newer Blender than the one reading it (data may be lost).
+
+Units: the scene's unit scale (metres per Blender unit; unitless scenes are metres),
+unless asset.toml says `units`; `scale` multiplies after; `up_axis` turns the model
+(Blender is Z up).
 
 bpy is imported only inside the functions that need it, so this module imports
 without Blender. Everything else here is plain numpy on arrays.
@@ -35,20 +54,18 @@ without Blender. Everything else here is plain numpy on arrays.
 from __future__ import annotations
 
 import contextlib
-import logging
 import math
 import os
 import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
 from .. import ir
 from ..errors import UserError
-
-log = logging.getLogger(__name__)
 
 BASE_LINK = "base"
 DEFAULT_MATERIAL = "default"
@@ -73,6 +90,9 @@ def read_blend(cfg) -> ir.Asset:
         bindings=cfg.bindings,
         description=cfg.description,
         config_path=cfg.path,
+        units=cfg.units,
+        up_axis=cfg.up_axis,
+        scale=cfg.scale,
     )
 
 
@@ -85,17 +105,28 @@ def read_blend_path(
     bindings=(),
     description: str = "",
     config_path=None,
+    units: str | None = None,
+    up_axis: str | None = None,
+    scale: float = 1.0,
 ) -> ir.Asset:
     """Read the .blend at `path`. `bindings` are asset.toml binding tables (dicts),
-    merged with the ones authored in the file; their errors name `config_path`."""
+    merged with the ones authored in the file; their errors name `config_path`.
+    `units`, `up_axis`, `scale`: asset.toml's (ingest.units)."""
+    from .units import resolve, transform_asset
+
     path = Path(path)
     _open(path)
+    scene = _Scene(driven=_driven_objects(bindings))
+    scene.warnings.update(_newer_file_warning(path))
     muted = _mute_python_drivers()
-    scene = _read_scene(path)
+    scene.warnings.update(_rest_armatures())
+    scene.warnings.update(_animation_warning())
+    _read_scene(path, scene)
     scene.notes.extend(f"{m}: Python driver not evaluated" for m in muted)
     asset_bindings = _merge_bindings(scene, bindings, Path(config_path) if config_path else path)
     links = _assign_mass(scene.links, mass_kg)
-    return ir.Asset(
+    frame = resolve(SimpleNamespace(units=units, up_axis=up_axis, scale=scale), _unit_metres(), None)
+    asset = ir.Asset(
         id=asset_id,
         category=category,
         links=links,
@@ -104,8 +135,9 @@ def read_blend_path(
         bindings=asset_bindings,
         description=description,
         source=str(path),
-        metadata=_metadata(scene),
+        metadata=_metadata(scene) + frame.metadata(),
     )
+    return transform_asset(asset, frame)
 
 
 # --- opening the file -----------------------------------------------------------
@@ -145,7 +177,88 @@ def _open(path: Path) -> None:
     except RuntimeError as e:
         reason = str(e).strip().splitlines()[0] if str(e).strip() else "unreadable"
         reason = reason.removeprefix("Error: ")
+        saved = header_version(path)
+        if saved is not None and saved > tuple(bpy.app.version[:2]):
+            reason += (f" (saved by Blender {saved[0]}.{saved[1]}, newer than the Blender "
+                       f"{bpy.app.version_string} reading it)")
         raise UserError(path, None, f"not a readable .blend file (truncated or corrupt?): {reason}") from None
+
+
+_HEADER = re.compile(rb"^BLENDER(?:[-_][vV](\d)(\d\d)|\d\d-\d\d[vV](\d\d)(\d\d))")
+
+
+def header_version(path: Path) -> tuple[int, int] | None:
+    """(major, minor) Blender version in an uncompressed .blend's header, e.g.
+    BLENDER-v279 (2.79) or BLENDER17-01v0500 (5.0); None when compressed or not one."""
+    with open(path, "rb") as fh:
+        head = fh.read(17)
+    m = _HEADER.match(head)
+    if m is None:
+        return None
+    major, minor = (m.group(1), m.group(2)) if m.group(1) else (m.group(3), m.group(4))
+    return int(major), int(minor)
+
+
+def _newer_file_warning(path: Path) -> dict[str, str]:
+    """A warning when the file was saved by a newer Blender than the one reading it
+    (its file version beyond bpy's): Blender reads it, but may drop what it does not know."""
+    import bpy
+
+    saved, reader = tuple(bpy.data.version), tuple(bpy.app.version_file)
+    if saved <= reader:
+        return {}
+    return {"blender_version": f"saved by Blender {saved[0]}.{saved[1]} (file version {'.'.join(map(str, saved))}), "
+                               f"newer than the Blender {bpy.app.version_string} reading it: data it does not know is "
+                               "lost (save it from this version, or update bpy)"}
+
+
+def _unit_metres() -> float | None:
+    """Metres per Blender unit of the scene, None for a unitless scene."""
+    import bpy
+
+    units = bpy.context.scene.unit_settings
+    return None if units.system == "NONE" else float(units.scale_length)
+
+
+def _listed(names: list[str], most: int = 5) -> str:
+    names = sorted(names)
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
+
+
+def _rest_armatures() -> dict[str, str]:
+    """Every armature in its rest pose (before any evaluation reads a mesh); one
+    warning naming them and, where the file showed one, the pose it was saved in."""
+    import bpy
+
+    armatures = [ob for ob in bpy.data.objects if ob.type == "ARMATURE"]
+    if not armatures:
+        return {}
+    posed = []
+    for ob in armatures:
+        action = ob.animation_data.action if ob.animation_data else None
+        moved = ob.pose is not None and any(not np.allclose(np.array(pb.matrix_basis), np.eye(4)) for pb in ob.pose.bones)
+        if ob.data.pose_position == "POSE" and (action is not None or moved):
+            posed.append(f"{ob.name} showed {'action ' + repr(action.name) if action else 'a pose'}")
+    for arm in bpy.data.armatures:
+        arm.pose_position = "REST"
+    bpy.context.evaluated_depsgraph_get().update()
+    names = [f"{ob.name} ({len(ob.data.bones)} bones)" for ob in armatures]
+    saved = f"; the file was saved posed ({'; '.join(sorted(posed))} at frame {bpy.context.scene.frame_current})" \
+        if posed else ""
+    return {"armature": f"armatures are not carried: {_listed(names)}; the meshes they deform or carry are read "
+                        f"in the rest pose{saved}"}
+
+
+def _animation_warning() -> dict[str, str]:
+    """One warning for the actions of the file, which the IR does not carry."""
+    import bpy
+
+    actions = [a.name for a in bpy.data.actions]
+    if not actions:
+        return {}
+    return {"animation": f"{len(actions)} actions are not carried ({_listed(actions)}): objects are read as the "
+                         f"file shows them at frame {bpy.context.scene.frame_current}, armatures at rest"}
 
 
 # ID collections whose blocks can carry drivers (animation_data).
@@ -270,16 +383,29 @@ class _Scene:
     # object name -> names of its visuals (one per material), for binding targets
     visuals_of: dict[str, tuple[str, ...]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    warnings: dict[str, str] = field(default_factory=dict)  # what is not carried -> the message
+    # objects and visuals whose shape-key weights asset.toml's bindings drive (_driven)
+    driven: frozenset[str] = frozenset()
+
+    def drives(self, ob) -> bool:
+        """Whether a shape binding sets the object's shape-key weights."""
+        if _prop(ob, "state_effect") == "shape":
+            return True
+        return any(t == ob.name or t.startswith(f"{ob.name}__") for t in self.driven)
 
 
-def _read_scene(path: Path) -> _Scene:
+def _driven_objects(tables) -> frozenset[str]:
+    """Targets (object or visual names) of asset.toml's shape bindings."""
+    return frozenset(str(t["target"]) for t in tables if t.get("effect") == "shape")
+
+
+def _read_scene(path: Path, scene: _Scene) -> None:
     import bpy
 
     objects = _asset_objects(bpy)
     if not any(ob.type in GEOMETRY_TYPES for ob in objects):
         raise UserError(path, None, "the scene holds no mesh objects")
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    scene = _Scene()
 
     for ob in objects:
         if "joint" in ob.keys() and ob.type != "EMPTY":
@@ -306,7 +432,6 @@ def _read_scene(path: Path) -> _Scene:
     for material_name in _referenced_materials(scene):
         if material_name not in scene.materials:
             scene.materials[material_name] = _material(bpy, path, material_name)
-    return scene
 
 
 def _asset_objects(bpy) -> list:
@@ -490,43 +615,80 @@ def _enabled_modifiers(ob) -> list:
 
 
 def _shape_key_arrays(path: Path, ob, depsgraph, key_blocks, scene: _Scene):
-    """Base arrays plus each non-basis key's absolute positions.
+    """The saved mix as the base arrays, plus each key but the reference alone at full
+    weight (module docstring).
 
-    Without modifiers: the mesh data with the basis key's positions, keys straight
-    from key_blocks. With modifiers: each key is evaluated alone through the modifier
-    stack (show_only_shape_key); if the stack changes the vertex count between keys
-    (it merges or welds by distance), the modifiers are ignored for this object and a
-    note says so."""
+    Without modifiers: both from the key blocks (_shape_key_arrays_raw). With
+    modifiers: the object evaluated as saved, and each key evaluated alone through the
+    stack (show_only_shape_key); if the stack changes the vertex count between them (it
+    merges or welds by distance), the modifiers are left out for this object and a
+    warning says so."""
     names = [kb.name for kb in key_blocks]
+    mixed = not scene.drives(ob)
+    _note_key_values(ob, key_blocks, scene, mixed)
     if not _enabled_modifiers(ob):
-        return _shape_key_arrays_raw(ob, key_blocks, names)
+        return _shape_key_arrays_raw(ob, key_blocks, names, mixed)
 
+    base = _mesh_arrays(ob.evaluated_get(depsgraph)) if mixed else None
     ob.show_only_shape_key = True
     evaluated = []
-    for i in range(len(key_blocks)):
+    for i in range(0 if base is None else 1, len(key_blocks)):
         ob.active_shape_key_index = i
         depsgraph.update()
         evaluated.append(_mesh_arrays(ob.evaluated_get(depsgraph)))
     ob.show_only_shape_key = False
     ob.active_shape_key_index = 0
     depsgraph.update()
-    base = evaluated[0]
+    if base is None:
+        base = evaluated.pop(0)
     if all(len(e[0]) == len(base[0]) for e in evaluated):
-        return (*base, tuple((name, e[0]) for name, e in zip(names[1:], evaluated[1:])))
-    note = f"{ob.name}: shape keys read without its modifiers (they change the vertex count between keys)"
-    log.warning("%s: %s", path, note)
-    scene.notes.append(note)
-    return _shape_key_arrays_raw(ob, key_blocks, names)
+        return (*base, tuple((name, e[0]) for name, e in zip(names[1:], evaluated)))
+    lost = scene.warnings.get("shape_keys", "shape keys read without the modifiers of: ")
+    scene.warnings["shape_keys"] = lost + ("" if lost.endswith(": ") else ", ") + \
+        f"{ob.name} (its modifiers change the vertex count between keys)"
+    return _shape_key_arrays_raw(ob, key_blocks, names, mixed)
 
 
-def _shape_key_arrays_raw(ob, key_blocks, names):
+def _note_key_values(ob, key_blocks, scene: _Scene, mixed: bool) -> None:
+    """The saved values, and whether they make the object's rest mesh, in the notes."""
+    values = [f"{kb.name}={kb.value:g}" for kb in list(key_blocks)[1:] if kb.value != 0.0 and not kb.mute]
+    if values:
+        what = "make its rest mesh" if mixed else "left to its shape binding (the rest mesh is the reference key)"
+        scene.notes.append(f"{ob.name}: shape key values {', '.join(values)} {what}")
+
+
+def _shape_key_arrays_raw(ob, key_blocks, names, mixed: bool = True):
+    """Mesh data arrays with the mix of the keys' saved values as positions (a key's
+    offset is from its reference key, scaled by its vertex group; the reference key
+    alone unless `mixed`), and each key alone: reference + key - its own reference."""
     co, tris, loops, mat_index, uv = _mesh_arrays(None, ob.data)
-    positions = []
+    positions = {}
     for kb in key_blocks:
         buf = np.empty(len(co) * 3, dtype=np.float32)
         kb.data.foreach_get("co", buf)
-        positions.append(buf.reshape(-1, 3).astype(np.float64))
-    return positions[0], tris, loops, mat_index, uv, tuple(zip(names[1:], positions[1:]))
+        positions[kb.name] = buf.reshape(-1, 3).astype(np.float64)
+    reference = positions[key_blocks[0].name]
+    mix = reference.copy()
+    alone = []
+    for kb in list(key_blocks)[1:]:
+        offset = positions[kb.name] - positions[kb.relative_key.name]
+        alone.append((kb.name, reference + offset))
+        if mixed and kb.value != 0.0 and not kb.mute:
+            mix += kb.value * _group_weights(ob, kb.vertex_group, len(co))[:, None] * offset
+    return mix, tris, loops, mat_index, uv, tuple(alone)
+
+
+def _group_weights(ob, group: str, n: int) -> np.ndarray:
+    """(n,) weights of vertex group `group` (ones when the key names none)."""
+    if not group or group not in ob.vertex_groups:
+        return np.ones(n)
+    index = ob.vertex_groups[group].index
+    weights = np.zeros(n)
+    for v in ob.data.vertices:
+        for g in v.groups:
+            if g.group == index:
+                weights[v.index] = g.weight
+    return weights
 
 
 # --- materials -------------------------------------------------------------------------
@@ -756,6 +918,7 @@ def _metadata(scene: _Scene) -> tuple[tuple[str, str], ...]:
     meta = [("source_format", "blend")]
     if scene.notes:
         meta.append(("notes", "; ".join(sorted(scene.notes))))
+    meta.extend((f"warning.{k}", scene.warnings[k]) for k in sorted(scene.warnings))
     return tuple(meta)
 
 

@@ -1,14 +1,30 @@
-"""Reader for mesh files (.stl, .obj, .ply, .glb) through trimesh.
+"""Reader for mesh files (.stl, .obj with its .mtl, .ply, .glb, .gltf, .dae) through trimesh.
 
-One link "base"; one visual per geometry of the file (a glTF scene's meshes, an OBJ's
-material groups), with its material, or a "default" PBR material. Units and up axis
-follow asset.toml: mm -> m, and Y-up -> Z-up by +90 deg about X (+Y becomes +Z).
-glTF (.glb) is Y-up by its specification, so a .glb is always converted from Y-up.
+One link "base"; one visual per geometry of the file (a glTF or COLLADA scene's meshes
+with their node transforms, an OBJ's material groups), with its material, or a
+"default" PBR material.
+
+Units and up axis (ingest.units): asset.toml `units` and `up_axis` where given, else
+what the file declares (COLLADA <unit meter> and <up_axis>; glTF is metres and Y up
+by its specification), else metres and Z up (STL, OBJ and PLY declare nothing).
+
+What the IR does not carry is said, one warning each in the asset's metadata
+(`warning.<what>`, see validate.checks SRC001): animations, glTF skins, COLLADA
+controllers. glTF morph targets are kept as shape keys, with the file's default
+weights honoured as in ingest.blend: the rest mesh is the weighted mix the file shows,
+each key the shape with that target alone at full weight.
+
+Files are untrusted: a COLLADA file that declares a DOCTYPE is refused (no entity is
+ever resolved), and a glTF buffer or image, an OBJ material library, or an image an
+.mtl names must be a file inside the source's folder.
 """
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import re
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,11 +32,12 @@ import numpy as np
 from .. import ir
 from ..errors import UserError
 from ..geometry.clean import apply_transform
+from .units import Frame, resolve
 
 MAX_BYTES = 512 * 1024 * 1024
-UNIT_SCALE = {"m": 1.0, "mm": 0.001}
-Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1.0, 0], [0, 1.0, 0, 0], [0, 0, 0, 1.0]])  # Rx(+90 deg)
+SUFFIXES = (".stl", ".obj", ".ply", ".glb", ".gltf", ".dae")
 DEFAULT_MATERIAL = ir.Material("default")
+COLLADA_UP = {"X_UP": "X", "Y_UP": "Y", "Z_UP": "Z"}
 
 
 def check_size(path: Path) -> None:
@@ -35,12 +52,6 @@ def check_size(path: Path) -> None:
         raise UserError(path, None, f"file is {size / 2**20:.0f} MB, over the {MAX_BYTES // 2**20} MB limit")
     if size == 0:
         raise UserError(path, None, "file is empty")
-
-
-def source_matrix(units: str, up_axis: str) -> np.ndarray:
-    """(4, 4) float64 from file coordinates to model metres, Z up."""
-    m = np.diag([UNIT_SCALE[units]] * 3 + [1.0])
-    return Y_UP_TO_Z_UP @ m if up_axis == "Y" else m
 
 
 def _safe_name(name: str, fallback: str) -> str:
@@ -70,81 +81,317 @@ def _material(geom, fallback: str) -> ir.Material:
         return ir.Material(name)
 
 
-def _geometries(loaded) -> list[tuple[str, object]]:
-    """(name, Trimesh in file coordinates with scene transforms applied) pairs, sorted."""
+# --- what a file declares -------------------------------------------------------------
+
+
+@dataclass
+class Morph:
+    """A glTF primitive's morph targets, in file coordinates: `rest` (n, 3) the mix the
+    file shows, `keys` (name, (n, 3) absolute positions), `weights` the defaults."""
+
+    base: np.ndarray
+    rest: np.ndarray
+    keys: tuple[tuple[str, np.ndarray], ...]
+    weights: tuple[float, ...]
+
+
+@dataclass
+class Facts:
+    """What a file says about itself beyond its triangles."""
+
+    metres: float | None = None
+    up: str | None = None
+    default_up: str = "Z"
+    warnings: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    morphs: dict[str, Morph] = field(default_factory=dict)  # trimesh geometry name -> targets
+
+
+def _hardened_parser():
+    from lxml import etree
+
+    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, dtd_validation=False,
+                           huge_tree=False, remove_comments=True)
+
+
+def collada_facts(path: Path) -> Facts:
+    """<unit meter>, <up_axis>, and the animations and controllers trimesh leaves out."""
+    from lxml import etree
+
+    if re.search(rb"<!DOCTYPE", Path(path).read_bytes()[:65536], re.IGNORECASE):
+        raise UserError(path, None, "COLLADA file declares a DOCTYPE (entities are refused, never resolved)")
+    try:
+        root = etree.parse(str(path), _hardened_parser()).getroot()
+    except etree.XMLSyntaxError as e:
+        raise UserError(path, None, f"not well-formed XML: {e}") from None
+    facts = Facts()
+    unit = root.find("{*}asset/{*}unit")
+    if unit is not None and unit.get("meter") is not None:
+        try:
+            metres = float(unit.get("meter"))
+        except ValueError:
+            raise UserError(path, "asset/unit", f"meter = {unit.get('meter')!r} is not a number") from None
+        if not np.isfinite(metres) or metres <= 0:
+            raise UserError(path, "asset/unit", f"meter = {unit.get('meter')!r} is not a positive length")
+        facts.metres = metres
+    up = root.findtext("{*}asset/{*}up_axis")
+    if up is not None:
+        if up.strip() not in COLLADA_UP:
+            raise UserError(path, "asset/up_axis", f"{up.strip()!r}: expected X_UP, Y_UP or Z_UP")
+        facts.up = COLLADA_UP[up.strip()]
+    animations = root.findall("{*}library_animations//{*}animation")
+    if animations:
+        facts.warnings["animation"] = f"{len(animations)} COLLADA animations are not carried: the model is read as it stands"
+    skins = root.findall("{*}library_controllers/{*}controller/{*}skin")
+    morphs = root.findall("{*}library_controllers/{*}controller/{*}morph")
+    if skins or morphs:
+        kinds = ", ".join(f"{n} {k}" for n, k in ((len(skins), "skin"), (len(morphs), "morph")) if n)
+        facts.warnings["controller"] = (f"COLLADA controllers ({kinds}) are not carried: the meshes they deform "
+                                        "are left out (export them as plain geometry)")
+    return facts
+
+
+def _gltf_header(path: Path):
+    from .gltf_file import GltfError, read
+
+    try:
+        return read(path)
+    except GltfError as e:
+        raise UserError(path, None, str(e)) from None
+    except MemoryError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise UserError(path, None, f"cannot read glTF: {e}") from None
+
+
+def _check_images(path: Path, header: dict) -> None:
+    from .gltf_file import inside
+
+    for i, image in enumerate(header.get("images", [])):
+        uri = image.get("uri") if isinstance(image, dict) else None
+        if uri and not uri.startswith("data:") and inside(path.parent, uri) is None:
+            raise UserError(path, f"images[{i}]", f"uri {uri!r} leaves the file's folder (refused)")
+
+
+def _primitive_names(header: dict) -> dict[tuple[int, int], str]:
+    """(mesh, primitive) -> the name trimesh gives its geometry (trimesh.exchange.gltf
+    names each primitive after its mesh, made unique in file order)."""
+    from trimesh.util import unique_name
+
+    names: dict[tuple[int, int], str] = {}
+    taken: dict[str, int] = {}
+    counts: dict = {}
+    for mi, mesh in enumerate(header.get("meshes", [])):
+        for pi, prim in enumerate(mesh.get("primitives", [])):
+            name = unique_name(mesh.get("name", "GLTF"), taken, counts=counts)
+            if prim.get("mode", 4) in (0, 1, 4, 5):
+                taken[name] = 1
+                names[(mi, pi)] = name
+    return names
+
+
+def _default_weights(header: dict, mi: int, n: int, facts: Facts) -> tuple[float, ...]:
+    """A mesh's default morph weights: its nodes' own when they agree, else the mesh's."""
+    mesh = header["meshes"][mi]
+    own = {tuple(node["weights"]) for node in header.get("nodes", []) if node.get("mesh") == mi and "weights" in node}
+    if len(own) > 1:
+        facts.warnings["morph_weights"] = (f"mesh {mesh.get('name', mi)!r}: its instances set different morph "
+                                           "weights; the mesh's defaults are used for all")
+    weights = next(iter(own)) if len(own) == 1 else tuple(mesh.get("weights", ()))
+    if len(weights) != n:
+        weights = (0.0,) * n
+    return tuple(float(w) for w in weights)
+
+
+def _morphs(path: Path, gltf, facts: Facts) -> None:
+    header = gltf.header
+    names = _primitive_names(header)
+    for (mi, pi), geom_name in names.items():
+        mesh = header["meshes"][mi]
+        prim = mesh["primitives"][pi]
+        targets = [t for t in prim.get("targets", []) if isinstance(t, dict)]
+        if not targets or not all("POSITION" in t for t in targets):
+            continue
+        label = mesh.get("name") or f"mesh{mi}"
+        given = (mesh.get("extras") or {}).get("targetNames") if isinstance(mesh.get("extras"), dict) else None
+        key_names = [str(n) for n in given] if isinstance(given, list) and len(given) == len(targets) else \
+            [f"{label}_target{k}" for k in range(len(targets))]
+        base = gltf.accessor(prim["attributes"]["POSITION"])
+        deltas = [gltf.accessor(t["POSITION"]) for t in targets]
+        if any(d.shape != base.shape for d in deltas):
+            raise UserError(path, label, "a morph target's POSITION count differs from the mesh's")
+        weights = _default_weights(header, mi, len(targets), facts)
+        rest = base + sum((w * d for w, d in zip(weights, deltas)), np.zeros_like(base))
+        keys = tuple((_unique(key_names[k], key_names[:k]), base + d) for k, d in enumerate(deltas))
+        facts.morphs[geom_name] = Morph(base, rest, keys, weights)
+        if any(weights):
+            facts.notes.append(f"{label}: morph weights {list(weights)} make its rest mesh")
+
+
+def _unique(name: str, before: list[str]) -> str:
+    while name in before:
+        name += "_"
+    return name
+
+
+def gltf_facts(path: Path) -> Facts:
+    """Metres, Y up; the morph targets; the animations and skins trimesh leaves out."""
+    gltf = _gltf_header(path)
+    header = gltf.header
+    _check_images(path, header)
+    facts = Facts(metres=None, up=None, default_up="Y")
+    _morphs(path, gltf, facts)
+    animations = header.get("animations", [])
+    if animations:
+        facts.warnings["animation"] = (f"{len(animations)} glTF animations are not carried: the model is read "
+                                       "as it stands (morph targets at their default weights)")
+    skins = header.get("skins", [])
+    if skins:
+        facts.warnings["armature"] = (f"{len(skins)} glTF skins are not carried: skinned meshes are read in "
+                                      "their bind pose")
+    return facts
+
+
+def obj_facts(path: Path) -> Facts:
+    """Refuses material libraries (and the images they name) outside the folder."""
+    from .gltf_file import inside
+
+    folder = path.parent
+    with open(path, "rb") as fh:
+        for line in fh:
+            if line.startswith(b"mtllib"):
+                for name in line[6:].decode("utf-8", "replace").split():
+                    lib = inside(folder, name)
+                    if lib is None:
+                        raise UserError(path, "mtllib", f"{name!r} leaves the file's folder (refused)")
+                    if lib.is_file():
+                        _check_mtl(lib, folder)
+    return Facts()
+
+
+def _check_mtl(mtl: Path, folder: Path) -> None:
+    from .gltf_file import inside
+
+    for line in mtl.read_bytes().decode("utf-8", "replace").splitlines():
+        words = line.split()
+        if words and (words[0].lower().startswith("map_") or words[0].lower() in ("bump", "disp", "decal", "refl")):
+            name = words[-1]
+            if inside(folder, name) is None:
+                raise UserError(mtl, words[0], f"{name!r} leaves the file's folder (refused)")
+
+
+FACTS = {".dae": collada_facts, ".gltf": gltf_facts, ".glb": gltf_facts, ".obj": obj_facts}
+
+
+# --- trimesh's scene to ir ---------------------------------------------------------------
+
+
+def _geometries(loaded) -> list[tuple[str, str, object, np.ndarray]]:
+    """(node name, geometry name, Trimesh in its own coordinates, (4, 4) node
+    transform) for every triangle geometry of the scene, sorted by node."""
     import trimesh
 
     if isinstance(loaded, trimesh.Trimesh):
-        return [("mesh", loaded)]
+        return [("mesh", "mesh", loaded, np.eye(4))]
     if isinstance(loaded, trimesh.Scene):
         out = []
         for node in sorted(loaded.graph.nodes_geometry):
             transform, geom_name = loaded.graph[node]
             geom = loaded.geometry[geom_name]
-            if not isinstance(geom, trimesh.Trimesh):
-                continue
-            g = geom.copy()
-            v, f = apply_transform(g.vertices, g.faces, transform)  # mirrored nodes keep outward faces
-            out.append((str(node), trimesh.Trimesh(v, f, visual=g.visual, process=False)))
+            if isinstance(geom, trimesh.Trimesh):
+                out.append((str(node), str(geom_name), geom, np.asarray(transform, dtype=np.float64)))
         return out
     return []
 
 
-def asset_from_trimesh(loaded, cfg, path: Path, up_axis: str, units: str,
-                       metadata: tuple[tuple[str, str], ...] = ()) -> ir.Asset:
-    """An ir.Asset from a trimesh Trimesh/Scene (shared with the CAD reader)."""
-    matrix = source_matrix(units, up_axis)
-    visuals, materials, seen = [], {}, set()
-    for name, geom in _geometries(loaded):
-        vertices = np.asarray(geom.vertices, dtype=np.float64)
-        faces = np.asarray(geom.faces, dtype=np.int64)
-        vis_name = _safe_name(name, "mesh")
+def _mesh(path: Path, name: str, geom, matrix: np.ndarray, morph: Morph | None) -> ir.Mesh:
+    faces = np.asarray(geom.faces, dtype=np.int64)
+    vertices = np.asarray(geom.vertices, dtype=np.float64)
+    keys: tuple[ir.ShapeKey, ...] = ()
+    if morph is not None and morph.base.shape == vertices.shape and np.allclose(morph.base, vertices, atol=1e-6):
+        vertices = morph.rest
+        keys = tuple(ir.ShapeKey(k, apply_transform(p, faces, matrix)[0]) for k, p in morph.keys)
+    if not np.isfinite(vertices).all() or any(not np.isfinite(k.vertices).all() for k in keys):
+        raise UserError(path, name, "non-finite (NaN or infinite) vertex coordinates")
+    v, f = apply_transform(vertices, faces, matrix)  # mirrored nodes keep outward faces
+    return ir.Mesh(v, f, shape_keys=keys)
+
+
+def asset_from_trimesh(loaded, cfg, path: Path, frame: Frame, metadata: tuple[tuple[str, str], ...] = (),
+                       facts: Facts | None = None) -> ir.Asset:
+    """An ir.Asset from a trimesh Trimesh/Scene (shared with the CAD reader): each
+    geometry through its node transform, then `frame` (file -> model metres, Z up)."""
+    facts = facts or Facts()
+    visuals, materials, seen, carried = [], {}, set(), set()
+    for node, geom_name, geom, transform in _geometries(loaded):
+        vis_name = _safe_name(node, "mesh")
         if vis_name[0].isdigit():  # OpenCASCADE numbers unnamed STEP solids
             vis_name = f"part_{vis_name}"
         while vis_name in seen:
             vis_name += "_"
         seen.add(vis_name)
-        if len(faces) == 0:
+        if len(geom.faces) == 0:
             continue
-        if not np.isfinite(vertices).all():
-            raise UserError(path, vis_name, "non-finite (NaN or infinite) vertex coordinates")
-        v, f = apply_transform(vertices, faces, matrix)
+        morph = facts.morphs.get(geom_name)
+        mesh = _mesh(path, vis_name, geom, frame.matrix() @ transform, morph)
+        if mesh.shape_keys:
+            carried.add(geom_name)
         mat = _material(geom, f"{vis_name}_material")
         materials.setdefault(mat.name, mat)
-        visuals.append(ir.Visual(vis_name, mat.name, (ir.Mesh(v, f),)))
+        visuals.append(ir.Visual(vis_name, mat.name, (mesh,)))
     if not visuals:
         raise UserError(path, None, "no triangles in the file")
+    lost = sorted(set(facts.morphs) - carried)
+    if lost:
+        facts.warnings["morph_targets"] = f"morph targets of {', '.join(lost)} are not carried (their mesh was not read as stored)"
+    notes = (("notes", "; ".join(sorted(facts.notes))),) if facts.notes else ()
+    warnings = tuple((f"warning.{k}", facts.warnings[k]) for k in sorted(facts.warnings))
     return ir.Asset(
         id=cfg.id, category=cfg.category, description=getattr(cfg, "description", ""),
         links=(ir.Link("base", visuals=tuple(visuals)),),
         materials=tuple(materials[k] for k in sorted(materials)),
-        source=str(path), metadata=metadata,
+        source=str(path), metadata=(*metadata, *notes, *warnings),
     )
+
+
+@contextlib.contextmanager
+def _quiet_trimesh():
+    """trimesh logs a traceback for each texture it cannot find; the readers report
+    what they cannot carry themselves."""
+    import warnings
+
+    logger = logging.getLogger("trimesh")
+    before = logger.disabled
+    logger.disabled = True
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        logger.disabled = before
 
 
 def _load(path: Path, file_type: str | None = None):
     import trimesh
 
     try:
-        # process=False: no silent merging; cleaning is the geometry step's job
-        return trimesh.load(str(path), file_type=file_type, process=False)
-    except UserError:
+        with _quiet_trimesh():
+            # process=False: no silent merging; cleaning is the geometry step's job
+            return trimesh.load(str(path), file_type=file_type, process=False)
+    except (UserError, MemoryError):
         raise
     except Exception as e:  # trimesh raises many types for corrupt files
         raise UserError(path, None, f"cannot read mesh file: {type(e).__name__}: {e}") from None
 
 
 def read_mesh(cfg) -> ir.Asset:
-    """Read cfg.source (.stl/.obj/.ply/.glb) into an ir.Asset in metres, Z up."""
+    """Read cfg.source (.stl/.obj/.ply/.glb/.gltf/.dae) into an ir.Asset in metres, Z up."""
     path = Path(cfg.source)
     check_size(path)
     suffix = path.suffix.lower()
-    if suffix not in (".stl", ".obj", ".ply", ".glb"):
+    if suffix not in SUFFIXES:
         raise UserError(path, None, f"unsupported mesh format {suffix!r}")
-    up = "Y" if suffix == ".glb" else cfg.up_axis
-    import warnings
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        loaded = _load(path, suffix[1:])
-    return asset_from_trimesh(loaded, cfg, path, up, cfg.units)
+    facts = FACTS.get(suffix, lambda p: Facts())(path)
+    loaded = _load(path, suffix[1:])
+    frame = resolve(cfg, facts.metres, facts.up, facts.default_up)
+    return asset_from_trimesh(loaded, cfg, path, frame, frame.metadata(), facts)

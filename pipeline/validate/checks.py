@@ -56,6 +56,8 @@ RULES: dict[str, tuple[str, str, str]] = {
     "HIER010": ("error", "hierarchy", "state binding with an empty or non-finite domain"),
     "HIER011": ("error", "hierarchy", "material binding thresholds do not match its materials"),
     "HIER012": ("error", "hierarchy", "path-like name (/, \\, .. or :) that could leave an output folder"),
+    "HIER013": ("warning", "hierarchy", "the source holds what the model does not carry (armature, animation, "
+                                        "morph targets, a newer file version): the reader says how it read the rest"),
     "PLACE001": ("error", "placement", "INSERT of an unknown asset block"),
     "PLACE002": ("error", "placement", "duplicate TAG"),
     "PLACE003": ("warning", "placement", "placement outside every platform of its level (on a slope or natural "
@@ -467,6 +469,12 @@ def _binding_findings(asset: ir.Asset) -> list[Finding]:
     return out
 
 
+def carried_findings(asset: ir.Asset) -> list[Finding]:
+    """The readers' `warning.<what>` metadata: what the source holds that no output
+    carries, one finding each (ingest.blend, ingest.mesh)."""
+    return [finding("HIER013", asset.id, message) for key, message in asset.metadata if key.startswith("warning.")]
+
+
 def hierarchy_findings(asset: ir.Asset) -> list[Finding]:
     aid = asset.id
     out = _name_findings("asset", aid, aid)
@@ -484,6 +492,7 @@ def hierarchy_findings(asset: ir.Asset) -> list[Finding]:
         out += _joint_graph(asset)
     out += _joint_findings(asset)
     out += _binding_findings(asset)
+    out += carried_findings(asset)
     return out
 
 

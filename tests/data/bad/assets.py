@@ -172,5 +172,10 @@ def hier012():
     return base(links=(ir.Link("../evil", visuals=link.visuals, collisions=link.collisions),)), {}
 
 
+def hier013():
+    # an armature the reader read at rest, as ingest.blend says it
+    return base().with_(metadata=(("warning.armature", "armatures are not carried: Rig (3 bones)"),)), {}
+
+
 FIXTURES = {name.upper(): fn for name, fn in sorted(globals().items())
             if name[:4] in ("geom", "hier") and name[4:].isdigit()}
