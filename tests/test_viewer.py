@@ -24,11 +24,9 @@ import pytest
 import mini_sources
 from pipeline import config
 from pipeline.scene.scene_gltf import Z_TO_Y, quat_to_matrix, read_glb
-from pipeline.viewer import libs, packs, serve, sun_table, tiles
+from pipeline.viewer import check, libs, packs, sun_table, tiles
 
 ROOT = Path(__file__).resolve().parent.parent
-DRIVER = ROOT / "tools" / "viewer_check.mjs"
-CHROMIUM = os.environ.get("CHROMIUM", "/usr/bin/chromium")
 
 
 def twin(*args, timeout=3000) -> subprocess.CompletedProcess:
@@ -319,39 +317,15 @@ def test_twin_view_without_a_built_viewer_is_one_clear_error(tmp_path):
 # --- in the browser ----------------------------------------------------------------
 
 
-def _browser_or_skip():
-    node = shutil.which("node")
-    missing = [what for what, ok in (("node", node), ("chromium", Path(CHROMIUM).is_file()),
-                                     ("playwright-core", (libs.NODE_MODULES / "playwright-core").is_dir()),
-                                     ("three", libs.manifests()["three"]), ("cesium", libs.manifests()["cesium"]))
-               if not ok]
-    if missing:
-        message = f"missing {', '.join(missing)}: bash .ci/install-tools"
+def check_page(build: Path, page: str, shot: Path, script: str | None = None, size=(1280, 800)) -> dict:
+    """pipeline.viewer.check on build/viewer/<page>; skipped without a browser (failed in CI)."""
+    lacking = check.missing()
+    if lacking:
+        message = f"missing {', '.join(lacking)}: {check.HINT}"
         if os.environ.get("CI"):
             pytest.fail(message)
         pytest.skip(message)
-    return node
-
-
-def check_page(build: Path, page: str, mode: str, shot: Path, script: str | None = None,
-               size=(1280, 800), timeout_s: int = 600) -> dict:
-    """tools/viewer_check.mjs on build/viewer/<page> served from a local server."""
-    node = _browser_or_skip()
-    srv = serve.in_background(build)
-    try:
-        args = [node, str(DRIVER), "--url", f"{serve.address(srv)}viewer/{page}", "--mode", mode,
-                "--screenshot", str(shot), "--width", str(size[0]), "--height", str(size[1]),
-                "--timeout", str(timeout_s * 1000)]
-        if script is not None:
-            path = shot.with_suffix(".js")
-            path.write_text(script)
-            args += ["--eval", str(path)]
-        proc = subprocess.run(args, capture_output=True, text=True, timeout=3 * timeout_s)
-    finally:
-        srv.shutdown()
-        srv.server_close()
-    assert proc.stdout.strip(), proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return check.run(build, page, screenshot=shot, size=size, script=script)
 
 
 def not_blank(png: Path) -> dict:
@@ -414,7 +388,7 @@ def viewer_page(mini, tmp_path_factory):
     walls = [dt.datetime(2025, 3, 30, 2, 30), dt.datetime(2025, 10, 26, 2, 30), dt.datetime(2025, 7, 1, 12, 0)]
     inputs = {"instants": instants, "clock": clock, "cases": _cases(), "local": ["2025-06-21", "07:15"],
               "walls": [w.replace(tzinfo=dt.timezone.utc).timestamp() for w in walls]}
-    result = check_page(out, "index.html", "viewer", shot, PAGE_SCRIPT % json.dumps(inputs))
+    result = check_page(out, "index.html", shot, PAGE_SCRIPT % json.dumps(inputs))
     return result, shot, inputs, walls, data
 
 
@@ -484,20 +458,20 @@ def test_a_page_without_its_scene_fails_and_says_why(mini, tmp_path):
     shutil.copytree(out / "viewer", broken / "viewer")
     shutil.copytree(out / "scene", broken / "scene")
     (broken / "scene" / "mini.glb").write_bytes(b"glTF")  # truncated
-    result = check_page(broken, "index.html", "viewer", tmp_path / "broken.png")
+    result = check_page(broken, "index.html", tmp_path / "broken.png")
     assert not result["ready"] and result["stats"]["errors"]
     # and without three.js: the note says how to install it
     shutil.rmtree(broken / "viewer" / "lib" / "three")
     (broken / "viewer" / "lib" / "three").mkdir()
     (broken / "viewer" / "lib" / "three" / "MISSING.txt").write_text("three was not installed: bash .ci/install-tools\n")
-    result = check_page(broken, "index.html", "viewer", tmp_path / "nolib.png")
+    result = check_page(broken, "index.html", tmp_path / "nolib.png")
     assert not result["ready"] and any("install-tools" in e for e in result["stats"]["errors"])
 
 
 def test_tiles_on_the_globe_land_at_the_site(mini, tmp_path_factory):
     sources, out = mini
     shot = tmp_path_factory.mktemp("shots") / "globe.png"
-    result = check_page(out, "globe.html", "globe", shot, size=(960, 600))
+    result = check_page(out, "globe.html", shot, size=(960, 600))
     assert result["ready"], result
     assert result["page_errors"] == [] and result["stats"]["errors"] == []
     stats = result["stats"]

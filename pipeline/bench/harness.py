@@ -23,11 +23,12 @@ from .stats import machine
 
 
 def _sections(results: dict):
-    from . import blender_peer, builds, gazebo, gltf_transform, sections
+    from . import blender_peer, builds, gazebo, gltf_transform, sections, viewer
 
     return [
         ("build", builds.build_section),
         ("gazebo", gazebo.gazebo_section),
+        ("viewer", viewer.viewer_section),
         ("lod", sections.lod_section),
         ("georef", sections.georef_section),
         ("runtime", sections.runtime_section),

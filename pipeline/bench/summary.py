@@ -34,7 +34,26 @@ def rows(sections: dict) -> list[dict]:
     out += _gltf_transform_rows(data.get("gltf_transform"))
     out += _render_rows(data.get("render"))
     out += _gazebo_rows(data.get("gazebo"))
+    out += _viewer_rows(data.get("viewer"))
     return [r for r in out if r is not None]
+
+
+def _viewer_rows(d):
+    """The 3D Tiles against the scene .glb they are made from; the scene page against
+    the globe page showing the tiles (both in headless Chromium on SwiftShader)."""
+    if not d:
+        return []
+    size = d["sizes"]
+    out = [_row("viewer", "tileset size", size["tileset_total"] / 2**20, size["scene_glb"] / 2**20, "MB",
+                "the scene .glb", f"{size['tiles']} tiles, meshes stored once per model and level")]
+    page, globe = d.get("page"), d.get("globe")
+    if page and globe:
+        note = "Chromium headless, WebGL on SwiftShader (CPU), 1280x800"
+        out += [_row("viewer", "page load to first drawn frame", page["first_frame_s"], globe["first_frame_s"], "s",
+                     "CesiumJS globe of the tiles", note),
+                _row("viewer", "browser memory (PSS)", page["pss_mb"], globe["pss_mb"], "MB",
+                     "CesiumJS globe of the tiles", note)]
+    return out
 
 
 def _gazebo_rows(d):

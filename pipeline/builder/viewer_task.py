@@ -44,17 +44,20 @@ def build_viewer(staging: Path, sources: str, build: str, memo: str | None = Non
     return page.write(staging, sources=Path(sources), record=record, manifests=manifests, sun_memo=sun_memo)
 
 
-def build_tiles(staging: Path, sources: str, build: str) -> dict:
-    """Task action: tiles/."""
+def build_tiles(staging: Path, sources: str, build: str, memo: str | None = None, memo_namespace: str = "") -> dict:
+    """Task action: tiles/. `memo`: the cache folder whose memos keep each model's
+    packs (baked meshes) by its glb, under `memo_namespace` (the task's code)."""
     from .. import config
     from ..viewer import tiles
+    from .memo import ArrayMemo, FileMemo
 
     site = config.load_site(Path(sources) / "site.toml")
     record, manifests = _scene_inputs(Path(build))
     lod = {"screen_tolerance_px": site.screen_tolerance_px, "reference_hfov_rad": site.reference_hfov_rad,
            "reference_width_px": site.reference_width_px}
+    kept = None if memo is None else (FileMemo(Path(memo), memo_namespace), ArrayMemo(Path(memo), memo_namespace))
     return tiles.write(Path(staging) / "tiles", models=Path(build) / "models", record=record, manifests=manifests,
-                       lod=lod)
+                       lod=lod, memo=kept)
 
 
 def build_libs(staging: Path) -> dict:
@@ -83,7 +86,8 @@ def viewer_tasks(site, sources: Path, build: Path, placed_assets: list[str], mem
              inputs=(site.path.resolve(), *scenarios, *page.static_files()), deps=("scene", *assets),
              params={"site": site.name}, code=code_version(*VIEWER_CODE),
              outputs=tuple(f"viewer/{n}" for n in page.PAGES) + ("viewer/app/", "viewer/data/")),
-        Task(name="tiles", stage="scene", action=build_tiles, args=args, inputs=(site.path.resolve(),),
+        Task(name="tiles", stage="scene", action=build_tiles,
+             args={**args, "memo": memo, "memo_namespace": code_version(*TILES_CODE)}, inputs=(site.path.resolve(),),
              deps=("scene", "terrain", *assets), params={"site": site.name}, code=code_version(*TILES_CODE),
              outputs=("tiles/",)),
     ]

@@ -53,11 +53,12 @@ class Pack:
     """One model at one level, baked and merged (see the module docstring).
 
     hull: (h, 3) float64 points of the merged mesh in the model's Z-up frame whose
-    convex hull is the mesh's (the bounding volumes transform these)."""
+    convex hull is the mesh's (the bounding volumes transform these). binary: None
+    for a pack recalled from the memo (its file is linked into place instead)."""
 
     asset: str
     level: int
-    binary: bytes
+    binary: bytes | None
     views: list[dict]
     accessors: list[dict]
     primitives: list[dict]
@@ -68,6 +69,26 @@ class Pack:
     variants: list[str] = field(default_factory=list)
     hull: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     triangles: int = 0
+    stored_length: int = 0  # the binary's length where it is kept elsewhere (binary None)
+
+    @property
+    def byte_length(self) -> int:
+        return len(self.binary) if self.binary is not None else self.stored_length
+
+    _META = ("asset", "level", "views", "accessors", "primitives", "materials", "textures", "images", "samplers",
+             "variants", "triangles")
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The pack but its binary, as plain arrays (a builder ArrayMemo entry)."""
+        meta = {k: getattr(self, k) for k in self._META}
+        meta["stored_length"] = self.byte_length
+        return {"meta": np.array(json.dumps(meta, sort_keys=True)), "hull": np.asarray(self.hull, dtype=np.float64)}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> "Pack":
+        """The pack `arrays` made, without its binary (kept as a file of its own)."""
+        meta = json.loads(np.asarray(arrays["meta"]).reshape(-1)[0])
+        return cls(binary=None, hull=np.array(arrays["hull"], dtype=np.float64).reshape(-1, 3), **meta)
 
 
 def _baked(doc: dict, binary: bytes, mesh_index: int, matrix: np.ndarray) -> list[dict]:
@@ -76,7 +97,7 @@ def _baked(doc: dict, binary: bytes, mesh_index: int, matrix: np.ndarray) -> lis
     mesh = doc["meshes"][mesh_index]
     weights = mesh.get("weights") or []
     m3 = matrix[:3, :3]
-    normal_m = np.linalg.inv(m3).T
+    normal_m = m3 if np.allclose(m3.T @ m3, np.eye(3), atol=1e-9) else np.linalg.inv(m3).T
     flip = np.linalg.det(m3) < 0
     out = []
     for p in mesh["primitives"]:

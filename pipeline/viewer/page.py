@@ -39,11 +39,12 @@ def static_files() -> list[Path]:
     return [STATIC / name for name in PAGES + APP]
 
 
-def inspection_cameras(site: config.Site, record: dict) -> list[dict]:
-    """Each inspection point as an eye (ENU) looking at its target placement at eye
-    height (horizontally, as an inspector stands), or at the site origin without one."""
+def inspection_cameras(site: config.Site, record: dict, manifests: dict[str, dict]) -> list[dict]:
+    """Each inspection point as an eye (ENU) looking at its target placement: at the
+    target's state-bound visual (a gauge) nearest to the eye where it has any, else
+    level from the eye at the target's position; the site origin without a target."""
     from ..georef import Georeferencer
-    from ..scene.placements import inspection_points_enu
+    from ..scene.placements import inspection_points_enu, yaw_matrix
 
     origin = record["origin"]
     georef = Georeferencer(site, (origin["latitude_deg"], origin["longitude_deg"], origin["height_m"]))
@@ -54,9 +55,22 @@ def inspection_cameras(site: config.Site, record: dict) -> list[dict]:
         target = by_tag.get(point.target) if point.target else None
         look = np.array(target["enu"] if target else (0.0, 0.0, 0.0), dtype=np.float64)
         look[2] = eye[2]
+        bound = _bound_points(manifests.get(target["asset"], {})) if target else np.zeros((0, 3))
+        if len(bound):
+            pose = yaw_matrix(target["yaw_rad"], target["enu"])
+            world = bound @ pose[:3, :3].T + pose[:3, 3]
+            look = world[np.argmin(np.linalg.norm(world - eye, axis=1))]
         out.append({"name": point.name, "target": point.target, "eye": [round(float(v), 6) for v in eye],
                     "look_at": [round(float(v), 6) for v in look]})
     return out
+
+
+def _bound_points(manifest: dict) -> np.ndarray:
+    """(k, 3) positions, in the model frame, of the visuals the state bindings move."""
+    links = {link["name"]: np.array(link["pose"], dtype=np.float64).reshape(4, 4) for link in manifest.get("links", [])}
+    points = [(links.get(b["link"], np.eye(4)) @ np.array(b["rest_pose"], dtype=np.float64).reshape(4, 4))[:3, 3]
+              for b in manifest.get("bindings", []) if b.get("rest_pose") and b.get("link")]
+    return np.array(points).reshape(-1, 3)
 
 
 def scenario_runs(sources: Path, zone) -> list[dict]:
@@ -107,7 +121,7 @@ def twin_json(site: config.Site, record: dict, manifests: dict[str, dict], sourc
         "lod": {"screen_tolerance_px": site.screen_tolerance_px, "reference_hfov_rad": site.reference_hfov_rad,
                 "reference_width_px": site.reference_width_px},
         "assets": {a: asset_record(m) for a, m in sorted(manifests.items())},
-        "inspection_points": inspection_cameras(site, record),
+        "inspection_points": inspection_cameras(site, record, manifests),
         "scenarios": scenario_runs(sources, site.zone),
         **described,
     }

@@ -180,7 +180,7 @@ def content_glb(path: Path, entries: list[tuple[Pack, np.ndarray, list[str]]], c
 
 def _add_pack(doc: dict, pack: Pack, variants: list[str], used: set[str]) -> int:
     """The pack's buffer, views, accessors, materials and one mesh into `doc`."""
-    doc["buffers"].append({"uri": "../" + quote(pack_file(pack)), "byteLength": len(pack.binary)})
+    doc["buffers"].append({"uri": "../" + quote(pack_file(pack)), "byteLength": pack.byte_length})
     buffer = len(doc["buffers"]) - 1
     views, accessors = len(doc["bufferViews"]), len(doc["accessors"])
     doc["bufferViews"] += [{**v, "buffer": buffer} for v in pack.views]
@@ -242,10 +242,38 @@ def box_volume(box: np.ndarray) -> dict:
 # --- the tileset ------------------------------------------------------------------
 
 
-def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], lod: dict) -> dict:
+def packs_of(out: Path, models: Path, manifests: dict[str, dict], memo=None) -> dict[tuple[str, int], Pack]:
+    """Every level of every placed model as a pack, its binary written to out/meshes/.
+    `memo`: builder memos (FileMemo, ArrayMemo) keeping packs by the model glb's
+    hash in its manifest, so a rerun bakes only the models that changed."""
+    packs: dict[tuple[str, int], Pack] = {}
+    for a in sorted(manifests):
+        glb = gltf_file(a)
+        digest = manifests[a].get("outputs", {}).get(glb)
+        doc = binary = None
+        for level in range(len(levels_of(manifests[a]))):
+            dest = out / f"meshes/{a}.lod{level}.bin"
+            key = f"{a}\0{digest}\0{level}"
+            if memo is not None and digest:
+                kept = memo[1].get(key)
+                if kept is not None and memo[0].link(key, dest):
+                    packs[(a, level)] = Pack.from_arrays(kept)
+                    continue
+            if doc is None:
+                doc, binary = read_glb(models / a / glb)
+            pack = packs[(a, level)] = make_pack(a, level, doc, binary)
+            dest.write_bytes(pack.binary)
+            if memo is not None and digest:
+                memo[0].keep(key, dest)
+                memo[1].put(key, pack.arrays())
+    return packs
+
+
+def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], lod: dict, memo=None) -> dict:
     """tiles/ of a built scene into `out` (the folder made): `record` placements.json,
     `manifests` the placed models' manifest.json, `lod` the site's [lod] settings
-    (screen_tolerance_px, reference_hfov_rad, reference_width_px). Returns figures."""
+    (screen_tolerance_px, reference_hfov_rad, reference_width_px), `memo` see
+    packs_of. Returns figures."""
     out = Path(out)
     (out / "content").mkdir(parents=True, exist_ok=True)
     (out / "meshes").mkdir(exist_ok=True)
@@ -253,12 +281,7 @@ def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], 
     assets = [p["asset"] for p in placements]
     errors = {a: levels_of(manifests[a]) for a in sorted(set(assets))}
     poses = np.array([yaw_matrix(p["yaw_rad"], p["enu"]) for p in placements]).reshape(-1, 4, 4)
-    packs: dict[tuple[str, int], Pack] = {}
-    for a in sorted(errors):
-        doc, binary = read_glb(models / a / gltf_file(a))
-        for level in range(len(errors[a])):
-            packs[(a, level)] = make_pack(a, level, doc, binary)
-            (out / pack_file(packs[(a, level)])).write_bytes(packs[(a, level)].binary)
+    packs = packs_of(out, models, {a: manifests[a] for a in errors}, memo)
 
     def shown(a: str, level: int) -> int:
         return min(level, len(errors[a]) - 1)
@@ -309,7 +332,7 @@ def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], 
                "extras": {"site": record["site"], "crs": record["crs"], "origin": origin,
                           "frame": "root transform: scene ENU (x east, y north, z up, metres) -> ECEF (EPSG:4978)"}}
     (out / TILESET).write_text(json.dumps(tileset, indent=1, sort_keys=True) + "\n")
-    figures["mesh_bytes"] = sum(len(p.binary) for p in packs.values())
+    figures["mesh_bytes"] = sum(p.byte_length for p in packs.values())
     figures["packs"] = len(packs)
     return figures
 
