@@ -131,6 +131,27 @@ def test_a_task_whose_worker_dies_fails_alone(src, tmp_path, jobs):
     assert sorted(fixed.ran) == ["join", "upper:b"]
 
 
+def test_a_pool_that_broke_between_two_waits_is_replaced(src, tmp_path):
+    """A worker may die while the scheduler is not waiting on it: the pool then
+    refuses the next task, and a new pool runs it."""
+    from concurrent.futures import BrokenExecutor, ThreadPoolExecutor
+
+    made = []
+
+    class Broken(ThreadPoolExecutor):
+        def submit(self, fn, /, *args, **kwargs):
+            if self is made[0]:
+                raise BrokenExecutor("a child process terminated abruptly")
+            return super().submit(fn, *args, **kwargs)
+
+    out = tmp_path / "build"
+    r = Scheduler(out, jobs=2, executor=lambda w: made.append(Broken(w.count)) or made[-1]).run(
+        toy_graph.tasks(src, out))
+    assert sorted(r.ran) == ["join", "upper:a", "upper:b"] and not r.errors and len(made) == 2
+    assert sorted(e["task"] for e in r.explanations) == ["join", "upper:a", "upper:b"]
+    assert (out / "joined.txt").read_text() == "ALPHA+BETA"
+
+
 @pytest.mark.parametrize("executor", ["pool", "in-process"])
 def test_running_out_of_memory_is_a_failure_not_a_trace(src, tmp_path, executor):
     out = tmp_path / "build"

@@ -190,6 +190,7 @@ class Scheduler:
             running: dict[Future, Task] = {}
             warming: list[tuple[Future, tuple[str, ...]]] = []  # warm-ups sent to idle workers (_warm_idle)
             pool, threads = None, None
+            dead = False  # the pool refused a task: one of its workers died
             workers: dict = {}  # the pool's processes, kept to learn how one died
             try:
                 while pending or running:
@@ -241,14 +242,24 @@ class Scheduler:
                         staging = self.build / ".staging" / task.key
                         shutil.rmtree(staging, ignore_errors=True)
                         staging.mkdir(parents=True)
-                        report.explanations.append(_stood_on(explain(task, previous, False, digests), stood_on))
                         # a task that starts with nothing running or waiting beside it
                         # gets every core (what becomes ready later shares them)
                         alone = not running and not any(t.name in pending for t in ready if t is not task)
                         cores = self.cores if alone else threads
-                        running[pool.submit(run_task, task.action, task.args, str(staging), cores)] = task
+                        try:
+                            future = pool.submit(run_task, task.action, task.args, str(staging), cores)
+                        except BrokenExecutor:  # a worker died since the last wait: its pool is gone
+                            pending[name] = task
+                            dead = True
+                            break
+                        running[future] = task
+                        report.explanations.append(_stood_on(explain(task, previous, False, digests), stood_on))
                         workers.update(_processes(pool))
-                    if pool is not None:
+                    if dead and not running:  # nothing in flight to learn more from: a new pool
+                        pool.shutdown(wait=True, cancel_futures=True)
+                        pool, warming, workers, dead = None, [], {}, False
+                        continue
+                    if pool is not None and not dead:
                         self._warm_idle(pool, running, warming, pending, done)
                     if not running:
                         if pending:  # everything left waits on a failed task
@@ -291,7 +302,7 @@ class Scheduler:
                         self._save_state(state)
                     if lost:
                         pool.shutdown(wait=True, cancel_futures=True)
-                        pool, warming = None, []
+                        pool, warming, dead = None, [], False
                         self._worker_died(report, broken, lost, suspects, pending, done, workers)
                         workers = {}
             finally:
@@ -390,7 +401,10 @@ class Scheduler:
         modules = tuple(dict.fromkeys(m for t in pending.values() if started.issuperset(t.deps) for m in t.warm))
         if idle <= 0 or not modules or any(sent == modules for _, sent in warming):
             return
-        warming += [(pool.submit(warm_up, modules), modules) for _ in range(idle)]
+        try:
+            warming += [(pool.submit(warm_up, modules), modules) for _ in range(idle)]
+        except BrokenExecutor:
+            pass  # a worker died: the tasks in flight say so when they are waited for
 
     def _finish(self, state: dict, task: Task, digests: dict, meta: dict, report: BuildReport) -> None:
         entry = record(task, digests, meta["files"])
