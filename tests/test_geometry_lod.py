@@ -6,6 +6,8 @@ import trimesh
 
 from pipeline import ir
 from pipeline.errors import UserError
+from pipeline.bench import meshes
+from pipeline.bench.simplifiers import bench_simplifiers
 from pipeline.geometry import clean as C, lod, metrics
 
 
@@ -68,7 +70,7 @@ def test_lod_refuses_unclean_mesh():
 
 
 def test_bench_small_runs_every_method_isolated():
-    res = lod.bench_simplifiers({"sphere": sphere(3)}, ratios=(0.1,))
+    res = bench_simplifiers({"sphere": sphere(3)}, ratios=(0.1,))
     assert {r["method"] for r in res["runs"]} == set(lod.METHODS)
     for r in res["runs"]:
         assert not r["crashed"], r
@@ -78,14 +80,14 @@ def test_bench_small_runs_every_method_isolated():
 def test_cad_like_touching_parts_reduced_within_budget():
     # CAD-like: a core and thin sheds as separate touching closed parts (not welded)
     parts, off = [], 0
-    core_v, core_f = lod._revolve(np.array([[0.04, 0.0], [0.04, 1.0]]), 96)
+    core_v, core_f = meshes.revolve(np.array([[0.04, 0.0], [0.04, 1.0]]), 96)
     parts.append((core_v, core_f))
     for k in range(5):
         z0 = 0.1 + 0.18 * k
         prof = np.array([[0.04, z0], [0.12, z0 + 0.01], [0.12, z0 + 0.014], [0.04, z0 + 0.03]])
         t = np.linspace(0, 1, 24)
         prof = np.stack([np.interp(t, np.linspace(0, 1, 4), prof[:, 0]), np.interp(t, np.linspace(0, 1, 4), prof[:, 1])], 1)
-        parts.append(lod._revolve(prof, 96))
+        parts.append(meshes.revolve(prof, 96))
     v = np.concatenate([p[0] for p in parts])
     f = np.concatenate([p[1] + o for p, o in zip(parts, np.cumsum([0] + [len(p[0]) for p in parts[:-1]]))])
     ids = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
@@ -131,7 +133,7 @@ def test_levels_side_by_side_are_the_levels_one_after_the_other(monkeypatch, bud
     on budgets whose coarser searches cannot beat the finer level (the ceiling cuts)."""
     from pipeline import spare
 
-    v, f = lod.insulator_mesh(sheds=8, segments=48, target_faces=12000)
+    v, f = meshes.insulator_mesh(sheds=8, segments=48, target_faces=12000)
     mesh = C.clean_mesh(ir.Mesh(v, f))
     monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
     alone = lod.simplify_levels(mesh.vertices, mesh.faces, budgets)
@@ -195,7 +197,7 @@ def test_memo_gives_the_levels_the_search_gives_and_searches_only_what_changed(m
     from pipeline import spare
 
     monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
-    v, f = lod.insulator_mesh(sheds=8, segments=48, target_faces=12000)
+    v, f = meshes.insulator_mesh(sheds=8, segments=48, target_faces=12000)
     mesh = C.clean_mesh(ir.Mesh(v, f))
     budgets = [0.002, 0.006, 0.02]
     searched = []
@@ -248,7 +250,7 @@ def test_a_collapse_everywhere_lowers_the_target_and_locks_nothing(monkeypatch):
     (6,284 of 15,072 faces kept before; a few hundred now)."""
     from pipeline import spare
 
-    v, f = lod.insulator_mesh(sheds=8, segments=48, target_faces=12000)
+    v, f = meshes.insulator_mesh(sheds=8, segments=48, target_faces=12000)
     mesh = C.clean_mesh(ir.Mesh(v, f))
     rounds = []
     simplify = lod._meshopt
@@ -292,7 +294,7 @@ def test_a_fresh_miss_locks_a_narrow_neighbourhood_a_repeated_one_widens():
     """A miss where no vertex is locked yet locks its 4 nearest vertices in rounds 0-2,
     8 in rounds 3-5, ...; one whose nearest vertex a lock already holds locks
     4 << round (at most LOCK_NEIGHBOURS)."""
-    v, f = lod.noisy_sphere(4, 0.0)
+    v, f = meshes.noisy_sphere(4, 0.0)
     judge = lod._Judge(v, f, 2000)
     miss = v[[0]] * 1.01
     nothing = np.zeros(len(v), dtype=bool)
@@ -308,11 +310,11 @@ def test_a_fresh_miss_locks_a_narrow_neighbourhood_a_repeated_one_widens():
 
 def _spheres(count: int, subdivisions: int, noise: float = 0.002):
     """`count` noisy unit spheres in a row along X, each its own part: (v, f, part ids)."""
-    meshes = [lod.noisy_sphere(subdivisions, noise, seed=k) for k in range(count)]
-    v = np.concatenate([m[0] + (3.0 * k, 0.0, 0.0) for k, m in enumerate(meshes)])
-    offsets = np.cumsum([0] + [len(m[0]) for m in meshes[:-1]])
-    f = np.concatenate([m[1] + o for m, o in zip(meshes, offsets)])
-    return v, f, np.repeat(np.arange(count), [len(m[0]) for m in meshes])
+    spheres = [meshes.noisy_sphere(subdivisions, noise, seed=k) for k in range(count)]
+    v = np.concatenate([m[0] + (3.0 * k, 0.0, 0.0) for k, m in enumerate(spheres)])
+    offsets = np.cumsum([0] + [len(m[0]) for m in spheres[:-1]])
+    f = np.concatenate([m[1] + o for m, o in zip(spheres, offsets)])
+    return v, f, np.repeat(np.arange(count), [len(m[0]) for m in spheres])
 
 
 def test_pieces_take_every_face_once_and_cut_between_parts_where_there_are_several():
@@ -326,7 +328,7 @@ def test_pieces_take_every_face_once_and_cut_between_parts_where_there_are_sever
     moved[1500] += (1e-4, 0.0, 0.0)  # a modeller's edit: the same pieces
     assert all(np.array_equal(a, b) for a, b in zip(pieces, lod._pieces(moved, f, 3000)))
 
-    one_v, one_f = lod.noisy_sphere(5)  # 20,480 faces, one part: cut through it
+    one_v, one_f = meshes.noisy_sphere(5)  # 20,480 faces, one part: cut through it
     through = lod._pieces(one_v, one_f, 6000)
     assert len(through) == 4 and all(len(p) <= 6000 for p in through)
     assert np.array_equal(np.sort(np.concatenate(through)), np.arange(len(one_f)))
@@ -336,7 +338,7 @@ def test_faces_added_in_one_place_change_one_piece():
     """Cuts are at a median rounded to a grid, not at a face count: 64 faces more in
     one place (a clean step keeping faces it dropped before) leave the other pieces
     as they were."""
-    v, f = lod.noisy_sphere(5)
+    v, f = meshes.noisy_sphere(5)
     before = lod._pieces(v, f, 6000)
     centroids = v[f].mean(axis=1)
     middle = centroids[before[1]].mean(axis=0)  # of one piece, far from its borders
@@ -390,7 +392,7 @@ def test_a_part_searched_in_pieces_stays_closed_and_within_budget(monkeypatch):
 
     monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
     monkeypatch.setattr(lod, "PIECE_FACES", 6000)
-    v, f = lod.noisy_sphere(5)  # one closed part of 20,480 faces, cut in 4 pieces
+    v, f = meshes.noisy_sphere(5)  # one closed part of 20,480 faces, cut in 4 pieces
     budgets = [0.005, 0.02]
     levels = lod.simplify_levels(v, f, budgets)
     assert len(levels[1].faces) < len(levels[0].faces) < len(f) // 2

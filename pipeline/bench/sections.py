@@ -53,13 +53,14 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
 
 
 def lod_section(ctx: Context) -> dict:
-    lod = importlib.import_module("pipeline.geometry.lod")
-    bench = _bench_fn("pipeline.geometry.lod", "bench_simplifiers")
+    from .meshes import insulator_mesh, noisy_sphere, sliver_mesh
+    from .simplifiers import bench_simplifiers as bench
+
     if ctx.quick:
-        hard = {"insulator": lod.insulator_mesh(sheds=10, segments=48, target_faces=8_000),
-                "noisy_sphere": lod.noisy_sphere(subdivisions=4), "slivers": lod.sliver_mesh(n=60)}
+        hard = {"insulator": insulator_mesh(sheds=10, segments=48, target_faces=8_000),
+                "noisy_sphere": noisy_sphere(subdivisions=4), "slivers": sliver_mesh(n=60)}
     else:
-        hard = {"insulator": lod.insulator_mesh(), "noisy_sphere": lod.noisy_sphere(), "slivers": lod.sliver_mesh()}
+        hard = {"insulator": insulator_mesh(), "noisy_sphere": noisy_sphere(), "slivers": sliver_mesh()}
     meshes = {**hard, **_sample_meshes(ctx, ctx.pick(1, 2))}
     ratios = ctx.pick((0.1,), (0.1, 0.02))
     repeats = 1  # the 20-minute budget: one timing per run (2 repeats double the section)
