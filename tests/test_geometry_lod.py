@@ -9,6 +9,9 @@ from pipeline.errors import UserError
 from pipeline.bench import meshes
 from pipeline.bench.simplifiers import bench_simplifiers
 from pipeline.geometry import clean as C, lod, metrics
+from pipeline.geometry import simplify as S
+from pipeline.geometry.simplify import levels as L, pieces as P, search as SE
+from pipeline.validate.checks import visual_verdict
 
 
 def sphere(sub=4, offset=0.0):
@@ -16,23 +19,23 @@ def sphere(sub=4, offset=0.0):
     return np.asarray(s.vertices) * 0.5 + offset, np.asarray(s.faces, dtype=np.int64)
 
 
-@pytest.mark.parametrize("method", lod.METHODS)
+@pytest.mark.parametrize("method", S.METHODS)
 def test_simplify_within_budget_no_flips(method):
     v, f = sphere(4, offset=1e7)
-    out_v, out_f = lod.simplify(v, f, 0.01, method=method, samples=5000)
+    out_v, out_f = S.simplify(v, f, 0.01, method=method, samples=5000)
     assert 0 < len(out_f) < len(f) // 2
     err = metrics.hausdorff(v, f, out_v, out_f, samples=20000)
     assert err <= 0.01
     assert C.non_manifold_edge_count(out_f) == 0
     ref = metrics.SurfaceDistance(v - 1e7, f)
-    assert lod.flipped_face_count(ref, out_v - 1e7, out_f, 0.01) == 0
+    assert S.flipped_face_count(ref, out_v - 1e7, out_f, 0.01) == 0
 
 
 def test_budget_near_zero_and_huge():
     v, f = sphere(3)
-    same_v, same_f = lod.simplify(v, f, 1e-9, samples=5000)
+    same_v, same_f = S.simplify(v, f, 1e-9, samples=5000)
     assert len(same_f) == len(f)  # ratio ~1: nothing can be removed
-    tiny_v, tiny_f = lod.simplify(v, f, 10.0, samples=5000)
+    tiny_v, tiny_f = S.simplify(v, f, 10.0, samples=5000)
     assert 0 < len(tiny_f) <= 40  # ratio ~0: collapses but never vanishes
 
 
@@ -46,7 +49,7 @@ def test_lod_chain_asset():
         ir.Visual("body", "m", (dial,)), ir.Visual("gauge", "m", (gauge,)),
         ir.Visual("needle", "m", (dial,)), ir.Visual("oil", "m", (keyed,)))),),
         bindings=(ir.StateBinding("oil_level", "rotate", "needle", (0, 1)),), source="x.blend")
-    out = lod.lod_chain(lod.LodOptions(budgets_m=(0.002, 0.01, 0.05), samples=5000))(asset)
+    out = lod.lod_chain(lod.LodOptions(budgets_m=(0.002, 0.01, 0.05), samples=5000), verdict=visual_verdict)(asset)
     vis = {v.name: v for _, v in out.visuals()}
     assert len(vis["body"].lods) == 4
     tris = [m.triangle_count for m in vis["body"].lods]
@@ -71,7 +74,7 @@ def test_lod_refuses_unclean_mesh():
 
 def test_bench_small_runs_every_method_isolated():
     res = bench_simplifiers({"sphere": sphere(3)}, ratios=(0.1,))
-    assert {r["method"] for r in res["runs"]} == set(lod.METHODS)
+    assert {r["method"] for r in res["runs"]} == set(S.METHODS)
     for r in res["runs"]:
         assert not r["crashed"], r
         assert r["triangles"] <= 0.2 * 1280 and r["error_m"] < 0.1
@@ -92,7 +95,7 @@ def test_cad_like_touching_parts_reduced_within_budget():
     f = np.concatenate([p[1] + o for p, o in zip(parts, np.cumsum([0] + [len(p[0]) for p in parts[:-1]]))])
     ids = np.repeat(np.arange(len(parts)), [len(p[0]) for p in parts])
     budget = 0.003
-    r = lod.simplify_checked(v, f, budget, samples=20000, parts=ids)
+    r = S.simplify_checked(v, f, budget, samples=20000, parts=ids)
     assert len(r.faces) < len(f) // 2
     assert r.valid and r.error_m <= budget
     assert metrics.hausdorff(v, f, r.vertices, r.faces, samples=20000) <= budget
@@ -135,12 +138,11 @@ def test_levels_side_by_side_are_the_levels_one_after_the_other(monkeypatch, bud
 
     v, f = meshes.insulator_mesh(sheds=8, segments=48, target_faces=12000)
     mesh = C.clean_mesh(ir.Mesh(v, f))
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
-    alone = lod.simplify_levels(mesh.vertices, mesh.faces, budgets)
+    alone = S.simplify_levels(mesh.vertices, mesh.faces, budgets)
     spread = []
-    monkeypatch.setattr(lod, "spread", lambda parts: spread.append(len(parts)) or spare.spread(parts))
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "2")
-    side_by_side = lod.simplify_levels(mesh.vertices, mesh.faces, budgets)
+    workers = S.Workers(cores=2, spread=lambda parts: spread.append(len(parts)) or spare.spread(parts))
+    monkeypatch.setenv(spare.SHARE_VARIABLE, "2")  # spare.spread forks only with a core to spare
+    side_by_side = S.simplify_levels(mesh.vertices, mesh.faces, budgets, workers=workers)
     assert spread == [len(budgets)]  # it did run side by side, a process per level
     counts = [len(r.faces) for r in alone]
     assert counts[-1] == counts[-2] < len(mesh.faces)  # the coarsest level found nothing coarser
@@ -150,21 +152,21 @@ def test_levels_side_by_side_are_the_levels_one_after_the_other(monkeypatch, bud
 
 
 def test_board_ceiling_waits_for_every_finer_level():
-    board = lod._Board(3, faces=1000)
+    board = SE.Board(3, faces=1000)
     assert board.ceiling(0) == 1000
     assert board.ceiling(2) is None
     board.publish(1, None, [300, 1200])  # the middle level ends first, with nothing
     assert board.ceiling(2) is None
-    result = lod.Simplified(np.zeros((3, 3)), np.zeros((400, 3), dtype=np.int64), None, 0.0, 0, 0)
+    result = S.Simplified(np.zeros((3, 3)), np.zeros((400, 3), dtype=np.int64), None, 0.0, 0, 0)
     board.publish(0, result, [200, 400])
     assert board.ceiling(1) == 400
     assert board.ceiling(2) == 400
     # a level whose search passed its ceiling on the way counts as nothing
-    board = lod._Board(3, faces=1000)
+    board = SE.Board(3, faces=1000)
     board.publish(0, result, [1000, 400])
     assert board.ceiling(1) == 1000
-    assert lod._under_ceiling(result, [1000, 400], 1000) is None
-    assert lod._under_ceiling(result, [999, 400], 1000) is result
+    assert SE.under_ceiling(result, [1000, 400], 1000) is None
+    assert SE.under_ceiling(result, [999, 400], 1000) is result
 
 
 class DictMemo:
@@ -194,19 +196,16 @@ def _same_levels(a, b):
 def test_memo_gives_the_levels_the_search_gives_and_searches_only_what_changed(monkeypatch):
     """A level is kept under its budget and its ceiling: with every level held, nothing
     is searched; after an edit of the coarsest budget, that level alone."""
-    from pipeline import spare
-
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
     v, f = meshes.insulator_mesh(sheds=8, segments=48, target_faces=12000)
     mesh = C.clean_mesh(ir.Mesh(v, f))
     budgets = [0.002, 0.006, 0.02]
     searched = []
-    real = lod._search_levels
-    monkeypatch.setattr(lod, "_search_levels", lambda judge, b, *a: searched.append(list(b)) or real(judge, b, *a))
+    real = L.search_levels
+    monkeypatch.setattr(L, "search_levels", lambda judge, b, *a: searched.append(list(b)) or real(judge, b, *a))
     memo = DictMemo()
-    plain = lod.simplify_levels(mesh.vertices, mesh.faces, budgets)
-    filled = lod.simplify_levels(mesh.vertices, mesh.faces, budgets, memo=memo)
-    recalled = lod.simplify_levels(mesh.vertices, mesh.faces, budgets, memo=memo)
+    plain = S.simplify_levels(mesh.vertices, mesh.faces, budgets)
+    filled = S.simplify_levels(mesh.vertices, mesh.faces, budgets, memo=memo)
+    recalled = S.simplify_levels(mesh.vertices, mesh.faces, budgets, memo=memo)
     assert searched == [budgets, budgets]  # the third call searched nothing
     assert len(memo.entries) == 3 and memo.hits == 3
     _same_levels(plain, filled)
@@ -215,53 +214,47 @@ def test_memo_gives_the_levels_the_search_gives_and_searches_only_what_changed(m
 
     edited = budgets[:2] + [0.03]
     searched.clear()
-    with_memo = lod.simplify_levels(mesh.vertices, mesh.faces, edited, memo=memo)
+    with_memo = S.simplify_levels(mesh.vertices, mesh.faces, edited, memo=memo)
     assert searched == [[0.03]]
-    _same_levels(lod.simplify_levels(mesh.vertices, mesh.faces, edited), with_memo)
+    _same_levels(S.simplify_levels(mesh.vertices, mesh.faces, edited), with_memo)
 
     # a finer level that changes moves the ceilings after it: those are searched again
     searched.clear()
     finer = [0.0025] + budgets[1:]
-    _same_levels(lod.simplify_levels(mesh.vertices, mesh.faces, finer, memo=memo),
-                 lod.simplify_levels(mesh.vertices, mesh.faces, finer))
+    _same_levels(S.simplify_levels(mesh.vertices, mesh.faces, finer, memo=memo),
+                 S.simplify_levels(mesh.vertices, mesh.faces, finer))
     assert searched[0] == finer
 
 
-def test_memo_entry_that_does_not_fit_is_searched_again(monkeypatch):
-    from pipeline import spare
-
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
+def test_memo_entry_that_does_not_fit_is_searched_again():
     v, f = sphere(4)
     budgets = [0.005, 0.02]
     memo = DictMemo()
-    plain = lod.simplify_levels(v, f, budgets, memo=memo)
+    plain = S.simplify_levels(v, f, budgets, memo=memo)
     for entry in memo.entries.values():  # corners past the mesh's vertices, then no arrays at all
         entry["corners"] = entry["corners"] + 10**6
-    _same_levels(plain, lod.simplify_levels(v, f, budgets, memo=memo))
+    _same_levels(plain, S.simplify_levels(v, f, budgets, memo=memo))
     for key in memo.entries:
         memo.entries[key] = {"found": np.ones(1, dtype=bool)}
-    _same_levels(plain, lod.simplify_levels(v, f, budgets, memo=memo))
+    _same_levels(plain, S.simplify_levels(v, f, budgets, memo=memo))
 
 
 def test_a_collapse_everywhere_lowers_the_target_and_locks_nothing(monkeypatch):
     """At 5 cm the insulator's first round collapses to a few dozen faces, wrong by
     more than twice the budget over most of it: the next round halves the target
-    and locks nothing, where locking around every bad point froze most of the mesh
-    (6,284 of 15,072 faces kept before; a few hundred now)."""
-    from pipeline import spare
-
+    and locks nothing, where locking around every bad point would freeze most of the
+    mesh."""
     v, f = meshes.insulator_mesh(sheds=8, segments=48, target_faces=12000)
     mesh = C.clean_mesh(ir.Mesh(v, f))
     rounds = []
-    simplify = lod._meshopt
+    simplify = SE.meshopt
 
     def recording(vertices, faces, target_faces, target_error, lock=None):
         rounds.append((target_error, 0 if lock is None else int(lock.sum())))
         return simplify(vertices, faces, target_faces, target_error, lock)
 
-    monkeypatch.setattr(lod, "_meshopt", recording)
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
-    level = lod.simplify_levels(mesh.vertices, mesh.faces, (0.05,))[0]
+    monkeypatch.setattr(SE, "meshopt", recording)
+    level = S.simplify_levels(mesh.vertices, mesh.faces, (0.05,))[0]
     assert rounds[:2] == [(0.05, 0), (0.025, 0)]
     assert level.valid and level.error_m <= 0.05
     assert len(level.faces) < len(mesh.faces) // 10
@@ -277,17 +270,18 @@ def test_non_manifold_edges_are_counted_per_part_and_only_added_ones_are_misses(
     parts = np.repeat([0, 1], 5)
     own = [[0, 1, 2], [1, 0, 3], [0, 1, 4]]  # edge 0-1 under three faces
     faces = np.array(own + [[5, 6, 7], [6, 5, 8], [7, 9, 8]])
-    judge = lod._Judge(vertices, faces, 2000, parts)
+    judge = S.Judge(vertices, faces, 2000, parts)
     assert judge.non_manifold == 1
     grows = np.vstack([faces, [[5, 6, 9]]])  # edge 5-6 now under three faces too
-    result, where = judge.measure(vertices, grows, np.arange(len(vertices)), 0.01, threshold=0.008)
+    measured = judge.measure(vertices, grows, np.arange(len(vertices)), 0.01, threshold=0.008)
+    result, where = measured.result, measured.misses
     assert result.non_manifold_added == 1 and not result.valid
     edge_middles = [p for p in where if np.isclose(p[1], 0) and np.isclose(p[2], 0)]
     assert edge_middles and all(np.allclose(p, [5.5, 0, 0]) for p in edge_middles)
 
     trades = np.vstack([faces[1:], [[5, 6, 9]]])  # the first part's edge gone, the second's added
-    assert lod._Judge(vertices, faces, 2000).measure(vertices, trades, np.arange(10), 0.01)[0].non_manifold_added == 0
-    assert judge.measure(vertices, trades, np.arange(10), 0.01)[0].non_manifold_added == 1
+    assert S.Judge(vertices, faces, 2000).measure(vertices, trades, np.arange(10), 0.01).result.non_manifold_added == 0
+    assert judge.measure(vertices, trades, np.arange(10), 0.01).result.non_manifold_added == 1
 
 
 def test_a_fresh_miss_locks_a_narrow_neighbourhood_a_repeated_one_widens():
@@ -295,17 +289,17 @@ def test_a_fresh_miss_locks_a_narrow_neighbourhood_a_repeated_one_widens():
     8 in rounds 3-5, ...; one whose nearest vertex a lock already holds locks
     4 << round (at most LOCK_NEIGHBOURS)."""
     v, f = meshes.noisy_sphere(4, 0.0)
-    judge = lod._Judge(v, f, 2000)
+    judge = S.Judge(v, f, 2000)
     miss = v[[0]] * 1.01
     nothing = np.zeros(len(v), dtype=bool)
-    fresh = lod._lock_around(judge, nothing, miss, 2)
+    fresh = SE.lock_around(judge, nothing, miss, 2)
     assert len(fresh) == 4 and judge.nearest_vertex(miss)[0] in fresh
-    assert len(lod._lock_around(judge, nothing, miss, 5)) == 8
+    assert len(SE.lock_around(judge, nothing, miss, 5)) == 8
     lock = nothing.copy()
     lock[judge.nearest_vertex(miss)] = True
-    again = lod._lock_around(judge, lock, miss, 5)
-    assert len(again) == lod.LOCK_NEIGHBOURS and set(fresh) <= set(again)
-    assert len(lod._lock_around(judge, lock, miss, 1)) == 8
+    again = SE.lock_around(judge, lock, miss, 5)
+    assert len(again) == SE.LOCK_NEIGHBOURS and set(fresh) <= set(again)
+    assert len(SE.lock_around(judge, lock, miss, 1)) == 8
 
 
 def _spheres(count: int, subdivisions: int, noise: float = 0.002):
@@ -319,17 +313,17 @@ def _spheres(count: int, subdivisions: int, noise: float = 0.002):
 
 def test_pieces_take_every_face_once_and_cut_between_parts_where_there_are_several():
     v, f, part = _spheres(8, 3)  # 8 x 1,280 faces
-    pieces = lod._pieces(v, f, 3000)
+    pieces = P.split(v, f, 3000)
     assert all(len(p) <= 3000 for p in pieces) and len(pieces) >= 4
     assert np.array_equal(np.sort(np.concatenate(pieces)), np.arange(len(f)))
     for p in pieces:  # whole spheres: no part is cut
         assert np.all(np.bincount(part[f[p, 0]], minlength=8) % 1280 == 0)
     moved = v.copy()
     moved[1500] += (1e-4, 0.0, 0.0)  # a modeller's edit: the same pieces
-    assert all(np.array_equal(a, b) for a, b in zip(pieces, lod._pieces(moved, f, 3000)))
+    assert all(np.array_equal(a, b) for a, b in zip(pieces, P.split(moved, f, 3000)))
 
     one_v, one_f = meshes.noisy_sphere(5)  # 20,480 faces, one part: cut through it
-    through = lod._pieces(one_v, one_f, 6000)
+    through = P.split(one_v, one_f, 6000)
     assert len(through) == 4 and all(len(p) <= 6000 for p in through)
     assert np.array_equal(np.sort(np.concatenate(through)), np.arange(len(one_f)))
 
@@ -339,7 +333,7 @@ def test_faces_added_in_one_place_change_one_piece():
     one place (a clean step keeping faces it dropped before) leave the other pieces
     as they were."""
     v, f = meshes.noisy_sphere(5)
-    before = lod._pieces(v, f, 6000)
+    before = P.split(v, f, 6000)
     centroids = v[f].mean(axis=1)
     middle = centroids[before[1]].mean(axis=0)  # of one piece, far from its borders
     near = np.argsort(np.linalg.norm(centroids - middle / np.linalg.norm(middle), axis=1))[:32]
@@ -349,7 +343,7 @@ def test_faces_added_in_one_place_change_one_piece():
     split = np.concatenate([np.c_[a, b, centres], np.c_[b, c, centres], np.c_[c, a, centres]])
     more_v = np.concatenate([v, centroids[near]])
     more_f = np.concatenate([np.delete(f, near, axis=0), split])
-    after = lod._pieces(more_v, more_f, 6000)
+    after = P.split(more_v, more_f, 6000)
 
     def contents(vertices, faces, pieces):
         return {np.sort(vertices[faces[p]].reshape(len(p), -1), axis=0).tobytes() for p in pieces}
@@ -362,21 +356,18 @@ def test_an_edit_in_one_piece_searches_that_piece_alone(monkeypatch):
     """Above PIECE_FACES a mesh is searched in pieces with a memo entry each: a vertex
     moved in one sphere searches that sphere's levels again and recalls the others',
     and the levels are those a search without memo gives."""
-    from pipeline import spare
-
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
-    monkeypatch.setattr(lod, "PIECE_FACES", 6000)
+    monkeypatch.setattr(P, "PIECE_FACES", 6000)
     v, f, part = _spheres(4, 4)  # 4 x 5,120 faces: a piece each
     budgets = [0.004, 0.012, 0.04]
     memo = DictMemo()
-    before = lod.simplify_levels(v, f, budgets, parts=part, memo=memo)
+    before = S.simplify_levels(v, f, budgets, parts=part, memo=memo)
     assert len(memo.entries) == 12
     moved = v.copy()
     moved[np.flatnonzero(part == 2)[7]] += (2e-4, 0.0, 0.0)
     hits = memo.hits
-    after = lod.simplify_levels(moved, f, budgets, parts=part, memo=memo)
+    after = S.simplify_levels(moved, f, budgets, parts=part, memo=memo)
     assert memo.hits - hits == 9 and len(memo.entries) == 15
-    _same_levels(after, lod.simplify_levels(moved, f, budgets, parts=part))
+    _same_levels(after, S.simplify_levels(moved, f, budgets, parts=part))
     for b, a in zip(before, after):
         assert len(a.faces) < len(f)
         untouched = [k for k in range(4) if k != 2]
@@ -388,13 +379,10 @@ def test_an_edit_in_one_piece_searches_that_piece_alone(monkeypatch):
 
 
 def test_a_part_searched_in_pieces_stays_closed_and_within_budget(monkeypatch):
-    from pipeline import spare
-
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
-    monkeypatch.setattr(lod, "PIECE_FACES", 6000)
+    monkeypatch.setattr(P, "PIECE_FACES", 6000)
     v, f = meshes.noisy_sphere(5)  # one closed part of 20,480 faces, cut in 4 pieces
     budgets = [0.005, 0.02]
-    levels = lod.simplify_levels(v, f, budgets)
+    levels = S.simplify_levels(v, f, budgets)
     assert len(levels[1].faces) < len(levels[0].faces) < len(f) // 2
     for level, budget in zip(levels, budgets):
         _, counts = C.edge_face_counts(level.faces)

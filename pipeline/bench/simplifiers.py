@@ -15,7 +15,7 @@ import numpy as np
 
 from .. import ir
 from ..geometry import clean as _clean
-from ..geometry.lod import MEASURE_SAMPLES, METHODS, _Judge as Judge, simplify_to_count
+from ..geometry.simplify import MEASURE_SAMPLES, METHODS, Judge, simplify_to_count
 from .meshes import insulator_mesh, noisy_sphere, sliver_mesh
 
 
