@@ -496,3 +496,89 @@ def test_tiles_on_the_globe_land_at_the_site(mini, tmp_path_factory):
     assert (picked[:, 2] > 40.0).all() and (picked[:, 2] < 65.0).all()
     assert abs(stats["centre"][0] - o["latitude_deg"]) < 0.002 and abs(stats["centre"][1] - o["longitude_deg"]) < 0.002
     assert not_blank(shot)["std"] > 10
+
+
+# --- the sample (slow) ----------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def sample(tmp_path_factory):
+    """The sample built into a scratch folder (tasks restored from the checkout's
+    cache when there) and its oil-leak scenario run."""
+    root = tmp_path_factory.mktemp("sample")
+    out = root / "build"
+    cache = ROOT / "build" / ".cache" if (ROOT / "build" / ".cache").is_dir() else root / "cache"
+    proc = twin("build", "--sources", ROOT / "sources", "--out", out, "--cache", cache, "--json")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    proc = twin("run", ROOT / "sources" / "scenarios" / "oil_leak.toml", "--out", out)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out
+
+
+SAMPLE_SCRIPT = """(async () => {
+  const app = window.twinViewer.app;
+  const sel = document.getElementById("run");
+  sel.value = "oil_leak";
+  sel.dispatchEvent(new Event("change"));
+  const steps = %s, out = {};
+  for (const k of steps) {
+    app.showRunStep("oil_leak", k);
+    const applied = app.applyState("RE-A1", app.fed.get("reactor_A1"));
+    await new Promise((r) => setTimeout(r, 300));  // a variant's material loads asynchronously
+    const lamp = app.byTag.get("RE-A1").bound.get("alarm_lamp");
+    out[k] = {applied, fed: app.fed.get("reactor_A1"),
+              lamp: lamp.members.map((m) => m.meshes.map((x) => x.material.name))};
+  }
+  app.goToInspection("RE-A1_gauges");
+  app.render();
+  const c = app.renderer.domElement.getBoundingClientRect();
+  const hit = app.pickAt(c.left + c.width / 2, c.top + c.height / 2);
+  app.select(hit && hit.tag);
+  app.render();
+  return {steps: out, hit};
+})()"""
+
+
+@pytest.mark.slow
+def test_sample_in_the_viewer_plays_the_run_as_the_runtime_maps_it(sample):
+    from pipeline.runtime import graph, nodes, run
+
+    steps = [0, 30, 60]
+    shot = Path(os.environ.get("TWIN_VIEWER_SHOTS", sample)) / "viewer_sample.png"
+    result = check_page(sample, "index.html", shot, SAMPLE_SCRIPT % json.dumps(steps))
+    assert result["ready"], result
+    assert result["page_errors"] == [] and result["stats"]["errors"] == []
+    assert result["stats"]["instances"] == result["stats"]["placements"] == 787
+    assert result["stats"]["runs"] == ["oil_leak"]
+    scenario = graph.load_scenario(ROOT / "sources" / "scenarios" / "oil_leak.toml", run.scene_zone(sample))
+    observed = [o for o in run.load_observed(sample) if o.tag == "RE-A1"]
+    data, _ = run.simulate(scenario, observed)
+    for k in steps:
+        got = result["eval"]["steps"][str(k)]
+        states = {s.visual: s for s in data.frames[k]}
+        assert set(got["applied"]) == set(states)
+        for visual, s in states.items():
+            assert np.allclose(np.array(got["applied"][visual]["transform"]).reshape(4, 4), s.transform, atol=1e-9)
+            assert got["applied"][visual]["material"] == s.material
+            assert got["applied"][visual]["weights"] == pytest.approx(s.shape_weights, abs=1e-9)
+        lamp = states["alarm_lamp"].material
+        assert all(name == lamp for level in got["lamp"] for name in level), (k, got["lamp"])
+    assert result["eval"]["hit"] == {"tag": "RE-A1"}
+    assert not_blank(shot)["std"] > 20
+
+
+@pytest.mark.slow
+def test_sample_tiles_land_at_the_site_on_the_globe(sample):
+    shot = Path(os.environ.get("TWIN_VIEWER_SHOTS", sample)) / "globe_sample.png"
+    result = check_page(sample, "globe.html", shot)
+    assert result["ready"], result
+    record = json.loads((sample / "scene" / "placements.json").read_text())
+    o = record["origin"]
+    stats = result["stats"]
+    assert len(stats["placements"]) == 787 and len(stats["picked"]) >= 20
+    picked = np.array(stats["picked"])
+    # the site is about 300 m across: every drawn point within 400 m of the origin
+    north = (picked[:, 0] - o["latitude_deg"]) * 110_600
+    east = (picked[:, 1] - o["longitude_deg"]) * 111_320 * np.cos(np.radians(o["latitude_deg"]))
+    assert (np.hypot(north, east) < 400).all() and (picked[:, 2] > 40).all() and (picked[:, 2] < 90).all()
+    assert not_blank(shot)["std"] > 10
