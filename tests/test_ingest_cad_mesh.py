@@ -97,3 +97,355 @@ def test_bad_files(tmp_path):
         read_mesh(cfg(big))
     with pytest.raises(UserError, match="missing.stl"):
         read_mesh(cfg(tmp_path / "missing.stl"))
+
+
+# --- real inputs: the corpus, in a sources tree as a user lays it out -------------------
+
+CORPUS = Path(__file__).resolve().parents[2] / "shared" / "corpus"
+corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus")
+
+
+def asset_tree(root: Path, asset_id: str, files: list[Path], toml: str):
+    """sources/assets/<asset_id>/ in `root` holding copies of `files` and `toml`; its
+    asset.toml loaded as the build loads it."""
+    import shutil
+
+    from pipeline.config import load_asset_config
+
+    folder = root / "sources" / "assets" / asset_id
+    folder.mkdir(parents=True, exist_ok=True)
+    for f in files:
+        shutil.copy(f, folder / f.name)
+    (folder / "asset.toml").write_text(toml)
+    return load_asset_config(folder / "asset.toml")
+
+
+def read(cfg):
+    from pipeline.builder.source_task import read_source
+
+    return read_source(cfg)
+
+
+def model_points(asset) -> np.ndarray:
+    """(n, 3) every visual vertex in the model frame."""
+    return np.concatenate([v.mesh.vertices @ (link.pose @ v.pose)[:3, :3].T + (link.pose @ v.pose)[:3, 3]
+                           for link, v in asset.visuals()])
+
+
+def extents(asset) -> np.ndarray:
+    p = model_points(asset)
+    return p.max(axis=0) - p.min(axis=0)
+
+
+def carried(asset) -> list[str]:
+    """The HIER013 messages the checks give the asset (what reaches the report)."""
+    from pipeline.validate.checks import check_asset
+
+    return [f.message for f in check_asset(asset) if f.code == "HIER013"]
+
+
+POLE = CORPUS / "mesh" / "telephone_pole" / "meshes" / "telephone_pole.dae"
+POLE_SIZE = np.array([2.116, 0.235, 9.223])  # the corpus README's, COLLADA inches, Z up
+
+
+@corpus
+@pytest.mark.parametrize("extra, expected", [
+    ("", POLE_SIZE),                                          # <unit meter="0.0254"> and <up_axis>Z_UP</up_axis>
+    ('units = "cm"\n', POLE_SIZE / 0.0254 * 0.01),            # asset.toml's unit over the file's
+    ('scale = 0.5\n', POLE_SIZE * 0.5),                       # scale after the file's unit
+    ('units = "ft"\nscale = 2.0\n', POLE_SIZE / 0.0254 * 0.3048 * 2.0),
+    ('up_axis = "Y"\n', POLE_SIZE[[0, 2, 1]]),                # a Y-up override: (x, y, z) -> (x, -z, y)
+    ('up_axis = "X"\n', POLE_SIZE[[2, 1, 0]]),                # X up: (x, y, z) -> (-z, y, x)
+])
+def test_collada_unit_and_up_axis(tmp_path, extra, expected):
+    cfg = asset_tree(tmp_path, "pole", [POLE], f'category = "pole"\nsource = "telephone_pole.dae"\n{extra}')
+    asset = read(cfg)
+    np.testing.assert_allclose(extents(asset), expected, rtol=1e-3)
+    assert carried(asset) == []  # nothing in the file goes uncarried
+
+
+@corpus
+def test_collada_frame_is_recorded(tmp_path):
+    cfg = asset_tree(tmp_path, "pole", [POLE], 'category = "pole"\nsource = "telephone_pole.dae"\n')
+    meta = dict(read(cfg).metadata)
+    assert meta["units_m"] == "0.0254 (file)" and meta["up_axis"] == "Z (file)"
+
+
+def _y_up(v: np.ndarray) -> np.ndarray:
+    return np.column_stack([v[:, 0], -v[:, 2], v[:, 1]])
+
+
+@corpus
+@pytest.mark.parametrize("up, expected", [(None, (4.869, 2.792, 2.583)), ("Z", (4.869, 2.583, 2.792))])
+def test_glb_is_y_up_unless_asset_toml_says(tmp_path, up, expected):
+    toml = 'category = "truck"\nsource = "CesiumMilkTruck.glb"\n' + (f'up_axis = "{up}"\n' if up else "")
+    cfg = asset_tree(tmp_path, "truck", [CORPUS / "mesh" / "CesiumMilkTruck.glb"], toml)
+    asset = read(cfg)
+    np.testing.assert_allclose(extents(asset), expected, rtol=1e-3)
+    assert len(list(asset.visuals())) == 5  # three body primitives, two wheel instances
+    (warning,) = carried(asset)
+    assert warning.startswith("1 glTF animations are not carried")
+
+
+def _gltf_arrays(path: Path) -> tuple[np.ndarray, list[np.ndarray], list[float]]:
+    """The SimpleMorph file's base positions, target offsets and default weights, read
+    with json and numpy alone (float VEC3 accessors in base64 buffers)."""
+    import base64
+    import json
+
+    doc = json.loads(path.read_text())
+    buffers = [base64.b64decode(b["uri"].split(",", 1)[1]) for b in doc["buffers"]]
+
+    def vec3(i):
+        acc = doc["accessors"][i]
+        view = doc["bufferViews"][acc["bufferView"]]
+        start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        stride = view.get("byteStride", 12)
+        raw = buffers[view["buffer"]]
+        return np.array([np.frombuffer(raw, np.float32, 3, start + k * stride) for k in range(acc["count"])],
+                        dtype=np.float64)
+
+    prim = doc["meshes"][0]["primitives"][0]
+    return vec3(prim["attributes"]["POSITION"]), [vec3(t["POSITION"]) for t in prim["targets"]], \
+        doc["meshes"][0]["weights"]
+
+
+@corpus
+def test_gltf_morph_targets_are_shape_keys_at_their_default_weights(tmp_path):
+    src = CORPUS / "mesh" / "simple_morph" / "SimpleMorph.gltf"
+    cfg = asset_tree(tmp_path, "morph", [src], 'category = "test"\nsource = "SimpleMorph.gltf"\n')
+    asset = read(cfg)
+    base, offsets, weights = _gltf_arrays(src)
+    assert weights == [0.5, 0.5]
+    (_, visual), = asset.visuals()
+    mesh = visual.mesh
+    # the rest mesh is what the file shows (its default weights), Y up turned to Z up
+    np.testing.assert_allclose(mesh.vertices, _y_up(base + 0.5 * offsets[0] + 0.5 * offsets[1]), atol=1e-9)
+    assert [k.name for k in mesh.shape_keys] == ["mesh0_target0", "mesh0_target1"]
+    for key, offset in zip(mesh.shape_keys, offsets):
+        np.testing.assert_allclose(key.vertices, _y_up(base + offset), atol=1e-9)
+    assert "morph weights [0.5, 0.5] make its rest mesh" in dict(asset.metadata)["notes"]
+    (warning,) = carried(asset)
+    assert warning.startswith("1 glTF animations are not carried")
+
+
+@corpus
+def test_step_in_millimetres_with_density_in_centimetres(tmp_path):
+    """as1: geometry contexts in mm; the cm units it also declares are its densities'."""
+    from pipeline.ingest.cad import step_length_units
+
+    src = CORPUS / "step" / "as1-oc-214-mat.stp"
+    cfg = asset_tree(tmp_path, "as1", [src], 'category = "test"\nsource = "as1-oc-214-mat.stp"\n')
+    assert step_length_units(cfg.source) == (0.001,)
+    asset = read(cfg)
+    np.testing.assert_allclose(extents(asset), (0.200, 0.150, 0.084), rtol=1e-3)
+    assert len(list(asset.visuals())) == 18  # 5 solids instanced into 18 parts
+
+
+@corpus
+def test_step_in_inches_surface_model(tmp_path):
+    src = CORPUS / "step" / "trj4_k1_top-tc-214.stp"
+    toml = 'category = "test"\nsource = "trj4_k1_top-tc-214.stp"\ntessellation_tolerance_m = 1e-5\n'
+    asset = read(asset_tree(tmp_path, "trj4", [src], toml))
+    np.testing.assert_allclose(extents(asset), (0.127, 0.0483, 0.0127), rtol=1e-3)
+    meta = dict(asset.metadata)
+    assert meta["step_units_m"] == "0.0254" and meta["tessellation_tolerance_m"] == "1e-05"
+
+
+# --- generated hard cases: every unit, a feet file, the guard, the memory limit --------
+
+_MM_UNIT = __import__("re").compile(
+    r"\(\s*LENGTH_UNIT\(\)\s*NAMED_UNIT\(\*\)\s*SI_UNIT\(\.MILLI\.,\s*\.METRE\.\)\s*\)")
+_CONVERSIONS = {"in": ("INCH", 25.4), "ft": ("FOOT", 304.8)}
+
+
+def relabel_step(text: str, unit: str, which: int | None = None) -> str:
+    """A STEP file's millimetre length units (all, or the `which`-th) declared as
+    `unit` instead, the numbers left as they are: SI prefixes in place, inch and foot
+    as conversion-based units of the millimetre, as CAD systems write them."""
+    si = {"m": "$", "cm": ".CENTI.", "mm": ".MILLI."}
+    if unit in si:
+        unit_text = f"( LENGTH_UNIT() NAMED_UNIT(*) SI_UNIT({si[unit]},.METRE.) )"
+    else:
+        unit_text = f"( CONVERSION_BASED_UNIT('{_CONVERSIONS[unit][0]}',#990001) LENGTH_UNIT() NAMED_UNIT(#990002) )"
+    spans = [m.span() for m in _MM_UNIT.finditer(text)]
+    for start, end in reversed(spans if which is None else [spans[which]]):
+        text = text[:start] + unit_text + text[end:]
+    if unit in si:
+        return text
+    mm = _CONVERSIONS[unit][1]
+    extra = ("#990000 = ( LENGTH_UNIT() NAMED_UNIT(*) SI_UNIT(.MILLI.,.METRE.) );\n"
+             f"#990001 = LENGTH_MEASURE_WITH_UNIT(LENGTH_MEASURE({mm}),#990000);\n"
+             "#990002 = DIMENSIONAL_EXPONENTS(1.,0.,0.,0.,0.,0.,0.);\n")
+    return text.replace("DATA;\n", "DATA;\n" + extra, 1)
+
+
+def gmsh_step(path: Path, build) -> None:
+    """A STEP file (millimetres) of the shapes `build(occ)` adds, written by gmsh."""
+    gmsh = pytest.importorskip("gmsh")
+    gmsh.initialize()
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.model.add("m")
+        build(gmsh.model.occ)
+        gmsh.model.occ.synchronize()
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+
+
+@pytest.fixture(scope="module")
+def cylinder_mm(tmp_path_factory) -> str:
+    """A cylinder of radius 1 and height 2 (file units), axis Z, written in mm."""
+    p = tmp_path_factory.mktemp("step") / "cylinder.step"
+    gmsh_step(p, lambda occ: occ.addCylinder(0, 0, 0, 0, 0, 2, 1))
+    return p.read_text()
+
+
+@pytest.mark.parametrize("unit, metres", [("m", 1.0), ("cm", 0.01), ("mm", 0.001), ("in", 0.0254),
+                                          ("ft", 0.3048)])
+def test_step_every_unit_from_the_file_and_asset_toml(tmp_path, cylinder_mm, unit, metres):
+    step = tmp_path / "c.step"
+    step.write_text(relabel_step(cylinder_mm, unit))
+    tol = metres / 2000  # the same mesh in every unit, its extents within 5e-4 of the circle's
+    toml = f'category = "test"\nsource = "c.step"\ntessellation_tolerance_m = {tol}\n'
+    asset = read(asset_tree(tmp_path / "file", "c", [step], toml))
+    np.testing.assert_allclose(extents(asset), np.array([2.0, 2.0, 2.0]) * metres, rtol=1e-3)
+    # asset.toml's unit over the file's: the numbers are read as inches
+    asset = read(asset_tree(tmp_path / "over", "c", [step], toml + 'units = "in"\nscale = 2.0\n'))
+    np.testing.assert_allclose(extents(asset), np.array([2.0, 2.0, 2.0]) * 0.0254 * 2.0, rtol=1e-3)
+
+
+def _chord_deviation(asset, radius: float) -> float:
+    """Largest gap between the cylinder and its triangles: r (1 - cos(pi / n)) for the n
+    segments of its top rim."""
+    p = model_points(asset)
+    top = p[np.isclose(p[:, 2], p[:, 2].max(), atol=radius * 1e-9)]
+    n = len(np.unique(np.round(np.arctan2(top[:, 1], top[:, 0]), 9)))
+    return radius * (1.0 - np.cos(np.pi / n))
+
+
+@pytest.mark.parametrize("tol", [0.001, 0.0002])  # finer than the angular tolerance's chords here
+def test_feet_step_is_meshed_at_the_tolerance_asked_in_metres(tmp_path, cylinder_mm, tol):
+    """cascadio's tol_linear is in millimetres: a feet file meshed at `tol` metres keeps
+    its chords within tol and no finer than a quarter of it (305 times finer before)."""
+    step = tmp_path / "c.step"
+    step.write_text(relabel_step(cylinder_mm, "ft"))
+    toml = f'category = "test"\nsource = "c.step"\ntessellation_tolerance_m = {tol}\n'
+    asset = read(asset_tree(tmp_path, "c", [step], toml))
+    p = model_points(asset)
+    assert np.ptp(p[:, 2]) == pytest.approx(0.6096, rel=1e-6)
+    assert np.linalg.norm(p[:, :2], axis=1).max() == pytest.approx(0.3048, rel=1e-6)
+    deviation = _chord_deviation(asset, 0.3048)
+    assert tol / 4 < deviation <= tol
+
+
+def test_mixed_length_units_are_each_read_and_cannot_be_overridden(tmp_path):
+    """Two solids, one in an inch context (gmsh writes the assembly's context first,
+    then each solid's): OpenCASCADE reads each in its own unit; a single asset.toml
+    unit cannot say what both are."""
+    from pipeline.ingest.cad import step_length_units
+
+    mm = tmp_path / "two.step"
+    gmsh_step(mm, lambda occ: (occ.addBox(0, 0, 0, 10, 10, 10), occ.addBox(100, 0, 0, 10, 10, 10)))
+    step = tmp_path / "mixed.step"
+    step.write_text(relabel_step(mm.read_text(), "in", which=1))
+    assert step_length_units(step) == (0.001, 0.0254)
+    toml = 'category = "test"\nsource = "mixed.step"\n'
+    asset = read(asset_tree(tmp_path / "a", "mixed", [step], toml))
+    sizes = sorted(float(np.ptp(v.mesh.vertices[:, 0])) for _, v in asset.visuals())
+    np.testing.assert_allclose(sizes, (0.010, 0.254), rtol=1e-6)
+    cfg = asset_tree(tmp_path / "b", "mixed", [step], toml + 'units = "mm"\n')
+    with pytest.raises(UserError) as e:
+        read(cfg)
+    assert e.value.file == str(cfg.path) and e.value.obj == "units"
+    assert "several length units (mm, in)" in e.value.message
+
+
+@pytest.fixture(scope="module")
+def sphere_ft(tmp_path_factory) -> Path:
+    """A sphere of 50 ft radius and a 20 ft box, in a file in feet."""
+    d = tmp_path_factory.mktemp("sphere")
+    gmsh_step(d / "mm.step", lambda occ: (occ.addSphere(0, 0, 0, 50), occ.addBox(100, 0, 0, 20, 20, 20)))
+    (d / "sphere.step").write_text(relabel_step((d / "mm.step").read_text(), "ft"))
+    return d / "sphere.step"
+
+
+def test_a_tolerance_that_would_make_too_many_triangles_is_refused_first(tmp_path, sphere_ft):
+    import time
+
+    toml = 'category = "test"\nsource = "sphere.step"\ntessellation_tolerance_m = 1e-6\n'
+    cfg = asset_tree(tmp_path, "sphere", [sphere_ft], toml)
+    t0 = time.perf_counter()
+    with pytest.raises(UserError) as e:
+        read(cfg)
+    assert time.perf_counter() - t0 < 60  # refused from the coarse pass, not after meshing
+    assert e.value.file == str(cfg.path) and e.value.obj == "tessellation_tolerance_m"
+    message = e.value.message
+    assert "over tessellation_max_triangles = 1,000,000" in message and "nothing was tessellated" in message
+    fits = float(message.split("about ")[-1].split(" m would")[0])
+    # the tolerance it offers is the limit's: 20 times coarser, a twentieth of it
+    toml = f'category = "test"\nsource = "sphere.step"\ntessellation_tolerance_m = {fits * 20}\n'
+    asset = read(asset_tree(tmp_path / "fit", "sphere", [sphere_ft], toml))
+    estimate = int(dict(asset.metadata)["tessellation_estimate"])
+    assert asset.triangle_count() <= estimate <= 1_000_000 / 20 * 1.05
+
+
+def test_estimate_is_above_the_count_it_predicts(tmp_path, sphere_ft, cylinder_mm):
+    """The guard's estimate errs above the triangles made (a refusal is no close call)
+    but not by orders of magnitude (it refuses no sensible tolerance)."""
+    step = tmp_path / "c.step"
+    step.write_text(cylinder_mm)
+    for source, tol in ((sphere_ft, 0.05), (sphere_ft, 0.01), (step, 1e-5), (step, 1e-7)):
+        toml = f'category = "test"\nsource = "{source.name}"\ntessellation_tolerance_m = {tol}\n'
+        asset = read(asset_tree(tmp_path / f"{source.stem}{tol}", "s", [source], toml))
+        estimate = int(dict(asset.metadata)["tessellation_estimate"])
+        assert asset.triangle_count() <= estimate <= 6 * asset.triangle_count(), (source.name, tol)
+
+
+def test_running_out_of_memory_tessellating_names_the_asset_and_the_knob(tmp_path, sphere_ft):
+    """Under a memory limit (as a build's worker has), OpenCASCADE dies in the child
+    process, and the reader says so naming asset.toml's tolerance: no crash here."""
+    import subprocess
+    import sys
+    import textwrap
+
+    toml = 'category = "test"\nsource = "sphere.step"\ntessellation_tolerance_m = 1e-4\n' \
+           'tessellation_max_triangles = 1000000000\n'
+    cfg = asset_tree(tmp_path, "sphere", [sphere_ft], toml)
+    script = textwrap.dedent(f"""
+        import re, resource
+        from pipeline.config import load_asset_config
+        from pipeline.errors import UserError
+        from pipeline.ingest.cad import read_cad
+        size = int(re.search(r"VmSize:\\s+(\\d+)", open("/proc/self/status").read()).group(1)) * 1024
+        resource.setrlimit(resource.RLIMIT_AS, (size + (300 << 20), resource.RLIM_INFINITY))
+        try:
+            read_cad(load_asset_config({str(cfg.path)!r}))
+        except UserError as e:
+            print("USER ERROR", e.file, e.obj, e.message, sep="|")
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    _, file, obj, message = proc.stdout.strip().splitlines()[-1].split("|")
+    assert (file, obj) == (str(cfg.path), "tessellation_tolerance_m")
+    assert "sphere.step" in message and ("memory limit" in message or "ran out of" in message)
+
+
+def test_workers_run_under_the_memory_limit(tmp_path):
+    from pipeline.builder.executors import Workers, default_memory, local_pool, memory_limit, run_task
+
+    pool = local_pool(Workers(1, 1, (), 6 << 30))
+    try:
+        out = pool.submit(run_task, _limit_of_this_process, {}, str(tmp_path)).result(timeout=120)
+    finally:
+        pool.shutdown()
+    assert out["result"]["limit"] == 6 << 30
+    assert default_memory(1) >= 4 << 30 and default_memory(64) == max(4 << 30, default_memory(1) // 64)
+    assert memory_limit() is None or memory_limit() > 0
+
+
+def _limit_of_this_process(staging) -> dict:
+    from pipeline.builder.executors import memory_limit
+
+    return {"limit": memory_limit()}
