@@ -215,7 +215,50 @@ def visibility():
     save("no_geometry")
 
 
+def textured():
+    """A quad with UVs whose material takes Base Color from a packed image and Normal,
+    through a Normal Map node, from an image beside the .blend; a second material's
+    image lies outside the .blend's folder (it must not be read)."""
+    reset()
+    ob = mesh("panel", verts=[(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)], faces=[(0, 1, 2, 3)], mats=("painted",))
+    uv = ob.data.uv_layers.new(name="UVMap")
+    for loop, (u, v) in zip(uv.data, [(0, 0), (1, 0), (1, 1), (0, 1)]):
+        loop.uv = (u, v)
+    mat = bpy.data.materials["painted"]
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = nodes["Principled BSDF"]
+    albedo = bpy.data.images.new("albedo", 4, 2)
+    albedo.pixels = [0.9, 0.1, 0.1, 1.0] * 4 + [0.1, 0.1, 0.9, 1.0] * 4
+    albedo.pack()
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image = albedo
+    links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    normal_img = bpy.data.images.new("bumps", 2, 2)
+    normal_img.pixels = [0.5, 0.5, 1.0, 1.0] * 4
+    normal_img.filepath_raw = str(OUT / "bumps.png")
+    normal_img.file_format = "PNG"
+    normal_img.save()
+    normal_img.filepath = "//bumps.png"
+    ntex = nodes.new("ShaderNodeTexImage")
+    ntex.image = normal_img
+    nmap = nodes.new("ShaderNodeNormalMap")
+    links.new(ntex.outputs["Color"], nmap.inputs["Color"])
+    links.new(nmap.outputs["Normal"], bsdf.inputs["Normal"])
+    other = mesh("sign", verts=[(0, 1, 0), (1, 1, 0), (1, 1, 1)], faces=[(0, 1, 2)], mats=("outside",))
+    other.data.uv_layers.new(name="UVMap")
+    far = bpy.data.images.new("far", 2, 2)
+    far.filepath_raw = str(OUT.parent / "far.png")
+    far.file_format = "PNG"
+    far.save()
+    omat = bpy.data.materials["outside"]
+    ftex = omat.node_tree.nodes.new("ShaderNodeTexImage")
+    ftex.image = far
+    omat.node_tree.links.new(ftex.outputs["Color"], omat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    save("textured")
+
+
 full()
+textured()
 visibility()
 shape_with_modifier()
 hostile()

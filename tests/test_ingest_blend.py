@@ -420,3 +420,22 @@ def test_sample_asset(toml):
         revolute = [j for j in asset.joints if j.type == "revolute"]
         assert len(revolute) == 2
         assert all(j.lower is not None and j.upper is not None and j.lower < j.upper for j in revolute)
+
+
+@blender
+def test_textures_packed_and_beside_the_file_are_read_outside_ones_warned(fx):
+    asset = read_blend_path(fx / "textured.blend", "textured", "test")
+    painted = asset.material("painted")
+    assert painted.base_color[:3] == (1.0, 1.0, 1.0)  # a linked Base Color: the image alone
+    assert set(painted.textures()) == {"base_color", "normal"}
+    assert painted.normal_texture.data == (fx / "bumps.png").read_bytes()
+    from PIL import Image
+    import io
+
+    albedo = np.asarray(Image.open(io.BytesIO(painted.base_color_texture.data)).convert("RGB"))
+    assert albedo.shape == (2, 4, 3) and albedo[..., 0].max() > 200 and albedo[..., 2].max() > 200
+    _, panel = _visual(asset, "panel")
+    np.testing.assert_allclose(np.sort(panel.mesh.uvs, axis=0), np.sort([[0, 0], [1, 0], [1, 1], [0, 1]], axis=0))
+    assert asset.material("outside").textures() == {}
+    warning = dict(asset.metadata)["warning.textures"]
+    assert "'far'" in warning and "outside" in warning

@@ -146,3 +146,60 @@ def test_the_thumbnail_shows_the_texture():
     bluish = (textured[:, 2] > textured[:, 0] + 60).mean()
     assert reddish > 0.2 and bluish > 0.2, (reddish, bluish)
     assert np.abs(plain[:, 0] - plain[:, 2]).max() < 5
+
+
+# --- real inputs: textures read from the corpus reach the outputs ---------------------
+
+CORPUS = Path(__file__).resolve().parents[2] / "shared" / "corpus"
+corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus")
+
+
+def _read_tree(tmp_path, asset_id: str, copy, toml: str):
+    import shutil
+
+    from pipeline.builder.source_task import read_source
+    from pipeline.config import load_asset_config
+
+    folder = tmp_path / "sources" / "assets" / asset_id
+    folder.mkdir(parents=True)
+    copy(shutil, folder)
+    (folder / "asset.toml").write_text(toml)
+    return read_source(load_asset_config(folder / "asset.toml"))
+
+
+@corpus
+def test_a_gazebo_model_folder_keeps_its_textures(tmp_path):
+    """telephone_pole: COLLADA naming its images by bare name, kept in the model
+    folder's materials/textures/ as Gazebo lays them out."""
+    pole = CORPUS / "mesh" / "telephone_pole"
+
+    def copy(sh, folder):  # the mesh beside asset.toml, the model's materials/ as they were
+        sh.copy(pole / "meshes" / "telephone_pole.dae", folder)
+        sh.copytree(pole / "materials", folder / "materials")
+
+    asset = _read_tree(tmp_path, "pole", copy, 'category = "pole"\nsource = "telephone_pole.dae"\n')
+    # the file's 100 wood triangles take the 512 px wood image, its 126 metal ones the 64 px metal one
+    size_of = {v.mesh.triangle_count: Image.open(io.BytesIO(asset.material(v.material).base_color_texture.data)).size
+               for _, v in asset.visuals()}
+    assert size_of == {100: (512, 512), 126: (64, 64)}
+    wood = Image.open(pole / "materials" / "textures" / "telephone_pole_wood_diffuse.jpg").convert("RGB")
+    carried = next(m for m in asset.materials if Image.open(io.BytesIO(m.base_color_texture.data)).size == (512, 512))
+    assert np.array_equal(np.asarray(Image.open(io.BytesIO(carried.base_color_texture.data)).convert("RGB")),
+                          np.asarray(wood))  # the decoded pixels, losslessly kept as PNG
+    assert all(v.mesh.uvs is not None for _, v in asset.visuals())
+    models = tmp_path / "models"
+    write_package(asset, models)
+    (result,) = external.gltf_validator([models / "pole" / names.gltf_file("pole")])
+    assert result.status == "passed", result.messages
+    assert len(list((models / "pole" / "textures").iterdir())) == 2
+
+
+@corpus
+def test_a_textured_glb_keeps_its_texture(tmp_path):
+    truck = CORPUS / "mesh" / "CesiumMilkTruck.glb"
+    asset = _read_tree(tmp_path, "truck", lambda sh, f: sh.copy(truck, f / truck.name),
+                       'category = "truck"\nsource = "CesiumMilkTruck.glb"\n')
+    (texture,) = {m.base_color_texture.name: m.base_color_texture for m in asset.materials if m.base_color_texture}.values()
+    assert Image.open(io.BytesIO(texture.data)).size == (2048, 2048)
+    painted = [v for _, v in asset.visuals() if asset.material(v.material).base_color_texture is not None]
+    assert painted and all(v.mesh.uvs is not None for v in painted)

@@ -66,6 +66,7 @@ import numpy as np
 
 from .. import ir
 from ..errors import UserError
+from .textures import blend_image
 
 BASE_LINK = "base"
 DEFAULT_MATERIAL = "default"
@@ -431,7 +432,7 @@ def _read_scene(path: Path, scene: _Scene) -> None:
     scene.links = _assemble_links(path, scene, link_pose, parent_of_link)
     for material_name in _referenced_materials(scene):
         if material_name not in scene.materials:
-            scene.materials[material_name] = _material(bpy, path, material_name)
+            scene.materials[material_name] = _material(bpy, path, material_name, scene.warnings)
 
 
 def _asset_objects(bpy) -> list:
@@ -566,7 +567,7 @@ def _read_object(path: Path, ob, depsgraph, link: str, link_pose: np.ndarray, sc
         visual_names.append(name)
         scene.parts.append(_Part(link, ob.name, ir.Visual(name, material_name, (mesh,), pose), rest))
         if material_name not in scene.materials:
-            scene.materials[material_name] = _material(bpy, path, material_name)
+            scene.materials[material_name] = _material(bpy, path, material_name, scene.warnings)
     scene.visuals_of[ob.name] = tuple(visual_names)
     if "state" in ob.keys():
         scene.bindings.extend(_authored_bindings(path, ob, visual_names, rest, keys, bpy))
@@ -694,9 +695,12 @@ def _group_weights(ob, group: str, n: int) -> np.ndarray:
 # --- materials -------------------------------------------------------------------------
 
 
-def _material(bpy, path: Path, name: str) -> ir.Material:
-    """Principled BSDF inputs (their unlinked values) of material `name`; a material
-    without one falls back to its viewport colour, metallic and roughness."""
+def _material(bpy, path: Path, name: str, warnings: dict | None = None) -> ir.Material:
+    """Principled BSDF inputs of material `name`: their unlinked values, and the image
+    of an Image Texture node linked to Base Color, Normal (through a Normal Map node) or
+    Emission Color, whose factor is then white as in Blender; a material without one
+    falls back to its viewport colour, metallic and roughness. An image that cannot be
+    had (external, outside the .blend's folder or missing) is a warning."""
     if name == DEFAULT_MATERIAL and name not in bpy.data.materials:
         return ir.Material(DEFAULT_MATERIAL)
     mat = bpy.data.materials.get(name)
@@ -714,13 +718,55 @@ def _material(bpy, path: Path, name: str) -> ir.Material:
     values = (r, g, b, alpha, float(inputs["Metallic"].default_value), float(inputs["Roughness"].default_value), *emission)
     if not all(math.isfinite(v) for v in values):
         raise UserError(path, name, "material has NaN or infinite values")
+    textures, missing = _textures(path, name, inputs)
+    if missing and warnings is not None:
+        warnings["textures"] = ", ".join(filter(None, [warnings.get("textures"), *missing]))
+    if "base_color" in textures:
+        r, g, b = 1.0, 1.0, 1.0
+    if "emissive" in textures:
+        emission = (strength, strength, strength)
     return ir.Material(
         name,
         base_color=(r, g, b, alpha),
         metallic=float(inputs["Metallic"].default_value),
         roughness=float(inputs["Roughness"].default_value),
         emission=emission,
+        **{f"{slot}_texture": t for slot, t in textures.items()},
     )
+
+
+_TEXTURE_SOCKETS = {"base_color": "Base Color", "normal": "Normal", "emissive": "Emission Color"}
+
+
+def _textures(path: Path, name: str, inputs) -> tuple[dict[str, ir.Texture], list[str]]:
+    """slot -> texture of the Principled inputs' linked images, and what could not be read."""
+    found, missing = {}, []
+    for slot, socket in _TEXTURE_SOCKETS.items():
+        image = _linked_image(inputs[socket]) if socket in inputs else None
+        if image is None:
+            continue
+        texture = blend_image(image, path, f"{_safe_stem(name)}_{slot}")
+        if texture is None:
+            missing.append(f"{name}.{socket} image {image.name!r} (not packed, not inside the .blend's folder)")
+        else:
+            found[slot] = texture
+    return found, missing
+
+
+def _linked_image(socket):
+    """The image of an Image Texture node feeding `socket`, directly or through a Normal
+    Map node; None for anything else (a procedural texture is not carried)."""
+    for link in socket.links:
+        node = link.from_node
+        if node.type == "NORMAL_MAP" and "Color" in node.inputs:
+            return _linked_image(node.inputs["Color"])
+        if node.type == "TEX_IMAGE" and node.image is not None:
+            return node.image
+    return None
+
+
+def _safe_stem(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "material"
 
 
 def _principled(mat):

@@ -26,12 +26,14 @@ import logging
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import unquote
 
 import numpy as np
 
 from .. import ir
 from ..errors import UserError
 from ..geometry.clean import apply_transform
+from .textures import trimesh_textures, trimesh_uvs, with_textures
 from .units import Frame, resolve
 
 MAX_BYTES = 512 * 1024 * 1024
@@ -314,7 +316,7 @@ def _mesh(path: Path, name: str, geom, matrix: np.ndarray, morph: Morph | None) 
     if not np.isfinite(vertices).all() or any(not np.isfinite(k.vertices).all() for k in keys):
         raise UserError(path, name, "non-finite (NaN or infinite) vertex coordinates")
     v, f = apply_transform(vertices, faces, matrix)  # mirrored nodes keep outward faces
-    return ir.Mesh(v, f, shape_keys=keys)
+    return ir.Mesh(v, f, uvs=trimesh_uvs(geom), shape_keys=keys)
 
 
 def asset_from_trimesh(loaded, cfg, path: Path, frame: Frame, metadata: tuple[tuple[str, str], ...] = (),
@@ -337,7 +339,13 @@ def asset_from_trimesh(loaded, cfg, path: Path, frame: Frame, metadata: tuple[tu
         if mesh.shape_keys:
             carried.add(geom_name)
         mat = _material(geom, f"{vis_name}_material")
-        materials.setdefault(mat.name, mat)
+        if mat.name not in materials:
+            textures = trimesh_textures(getattr(getattr(geom, "visual", None), "material", None),
+                                        _TEXTURE_SLOTS.get(path.suffix.lower(), ir.TEXTURE_SLOTS))
+            if textures and mesh.uvs is None:
+                facts.warnings["textures"] = f"{vis_name}: a texture without texture coordinates is not carried"
+                textures = {}
+            materials[mat.name] = with_textures(mat, textures)
         visuals.append(ir.Visual(vis_name, mat.name, (mesh,)))
     if not visuals:
         raise UserError(path, None, "no triangles in the file")
@@ -377,11 +385,43 @@ def _load(path: Path, file_type: str | None = None):
     try:
         with _quiet_trimesh():
             # process=False: no silent merging; cleaning is the geometry step's job
-            return trimesh.load(str(path), file_type=file_type, process=False)
+            return trimesh.load(str(path), file_type=file_type, process=False, resolver=_ImageResolver(path))
     except (UserError, MemoryError):
         raise
     except Exception as e:  # trimesh raises many types for corrupt files
         raise UserError(path, None, f"cannot read mesh file: {type(e).__name__}: {e}") from None
+
+
+# COLLADA has no normal, metallic-roughness or occlusion map of its own: what trimesh
+# (through pycollada's bump-map search) offers as a normal map can be an exporter's
+# specular level (3ds Max's <extra>), so only the diffuse and emission images are taken.
+_TEXTURE_SLOTS = {".dae": ("base_color", "emissive")}
+
+
+class _ImageResolver:
+    """Where a mesh file's images are looked up (by trimesh): beside the file, in
+    textures/ or materials/textures/ beside it (a Gazebo model folder's layout, with
+    the mesh moved up from meshes/), then in ../materials/textures/ (the mesh left in
+    meshes/); names inside those folders only (the file is untrusted: no other path
+    is read)."""
+
+    def __init__(self, path: Path):
+        folder = Path(path).resolve().parent
+        self.folders = (folder, folder / "textures", folder / "materials" / "textures",
+                        folder.parent / "materials" / "textures")
+
+    def get(self, name: str) -> bytes:
+        for folder in self.folders:
+            candidate = (folder / unquote(str(name))).resolve()
+            if candidate.is_relative_to(folder) and candidate.is_file():
+                return candidate.read_bytes()
+        raise FileNotFoundError(name)
+
+    def namespaced(self, namespace: str) -> "_ImageResolver":
+        return self
+
+    def write(self, name: str, data) -> None:
+        raise PermissionError("reading a source writes nothing")
 
 
 def read_mesh(cfg) -> ir.Asset:
