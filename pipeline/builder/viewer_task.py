@@ -7,6 +7,9 @@
   placements.json, the placed models' manifests, site.toml and the scenarios.
 - `tiles`: the 3D Tiles tileset -> tiles/. Reads placements.json, the placed models'
   packages and the terrain's, and site.toml's [lod].
+
+Like the scene, the page and the tiles stand on a failed asset's last package (the
+scene was made from it), so they always show the scene that is there.
 """
 
 from __future__ import annotations
@@ -84,10 +87,10 @@ def viewer_tasks(site, sources: Path, build: Path, placed_assets: list[str], mem
         Task(name="viewer", stage="scene", action=build_viewer,
              args={**args, "memo": memo, "memo_namespace": code_version(*SUN_CODE)},
              inputs=(site.path.resolve(), *scenarios, *page.static_files()), deps=("scene", *assets),
-             params={"site": site.name}, code=code_version(*VIEWER_CODE),
+             params={"site": site.name}, code=code_version(*VIEWER_CODE), previous_ok=assets,
              outputs=tuple(f"viewer/{n}" for n in page.PAGES) + ("viewer/app/", "viewer/data/")),
         Task(name="tiles", stage="scene", action=build_tiles,
              args={**args, "memo": memo, "memo_namespace": code_version(*TILES_CODE)}, inputs=(site.path.resolve(),),
              deps=("scene", "terrain", *assets), params={"site": site.name}, code=code_version(*TILES_CODE),
-             outputs=("tiles/",)),
+             outputs=("tiles/",), previous_ok=assets),
     ]
