@@ -439,3 +439,257 @@ def test_textures_packed_and_beside_the_file_are_read_outside_ones_warned(fx):
     assert asset.material("outside").textures() == {}
     warning = dict(asset.metadata)["warning.textures"]
     assert "'far'" in warning and "outside" in warning
+
+
+# --- real .blend files: the corpus, units, what is not carried -------------------------------
+
+CORPUS = ROOT.parent / "shared" / "corpus" / "blend"
+ROBOT = CORPUS / "RobotExpressive.blend"
+APPLY = CORPUS / "27_apply_modifier_with_shapekeys.blend"
+corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus")
+
+
+def blend_tree(root: Path, asset_id: str, src: Path, extra: str = ""):
+    """sources/assets/<asset_id>/ in `root` with a copy of `src` and an asset.toml."""
+    folder = root / "sources" / "assets" / asset_id
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copy(src, folder / src.name)
+    (folder / "asset.toml").write_text(f'category = "test"\nsource = "{src.name}"\n{extra}')
+    return load_asset_config(folder / "asset.toml")
+
+
+def model_points(asset: ir.Asset) -> np.ndarray:
+    """(n, 3) every visual vertex in the model frame."""
+    return np.concatenate([v.mesh.vertices @ (link.pose @ v.pose)[:3, :3].T + (link.pose @ v.pose)[:3, 3]
+                           for link, v in asset.visuals()])
+
+
+def in_blender(script: str, *args) -> dict:
+    """Run `script` in a clean Blender (a subprocess); it prints one JSON line last."""
+    import json
+
+    run = subprocess.run([sys.executable, "-c", textwrap.dedent(script), *map(str, args)],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+# The robot's meshes in world space with bpy alone, in the rest pose reached another way
+# than the reader's (every pose bone's transform cleared, no action), and as saved.
+ROBOT_BOUNDS = """
+    import json, sys
+    import bpy
+    from mathutils import Matrix
+    bpy.ops.wm.open_mainfile(filepath=sys.argv[1], load_ui=False, use_scripts=False)
+    def bounds():
+        dg = bpy.context.evaluated_depsgraph_get()
+        pts = []
+        for ob in bpy.context.view_layer.objects:
+            if ob.type == "MESH":
+                ev = ob.evaluated_get(dg)
+                pts += [list(ev.matrix_world @ v.co) for v in ev.to_mesh().vertices]
+                ev.to_mesh_clear()
+        return [[min(p[i] for p in pts) for i in range(3)], [max(p[i] for p in pts) for i in range(3)]]
+    saved = bounds()
+    for ob in bpy.data.objects:
+        if ob.type == "ARMATURE":
+            ob.animation_data_clear()
+            for pb in ob.pose.bones:
+                pb.matrix_basis = Matrix.Identity(4)
+    print(json.dumps({"saved": saved, "rest": bounds()}))
+"""
+
+
+@pytest.mark.blender
+@blender
+@corpus
+def test_rigged_robot_is_read_in_its_rest_pose_and_says_what_it_leaves(tmp_path):
+    cfg = blend_tree(tmp_path, "robot", ROBOT)
+    asset = read_blend(cfg)
+    p = model_points(asset)
+    figures = in_blender(ROBOT_BOUNDS, ROBOT)
+    np.testing.assert_allclose([p.min(axis=0), p.max(axis=0)], figures["rest"], rtol=1e-3, atol=1e-4)
+    assert not np.allclose(figures["saved"], figures["rest"], atol=1e-2)  # saved mid-action, not at rest
+    meta = dict(asset.metadata)
+    armature, animation = meta["warning.armature"], meta["warning.animation"]
+    assert "RobotArmature (43 bones)" in armature and "rest pose" in armature
+    assert "action 'Robot_Death' at frame 23" in armature
+    assert animation.startswith("14 actions are not carried (Robot_Dance, Robot_Death")
+    from pipeline.validate.checks import check_asset
+
+    assert sorted(f.message for f in check_asset(asset) if f.code == "HIER013") == sorted([armature, animation])
+    # the face's expressions stay shape keys of each of its visuals
+    heads = [v for _, v in asset.visuals() if v.name.startswith("Head")]
+    assert heads and all([k.name for k in v.mesh.shape_keys] == ["Angry", "Surprised", "Sad"] for v in heads)
+
+
+@pytest.mark.blender
+@blender
+@corpus
+def test_the_saved_action_and_frame_do_not_change_the_rest_pose(tmp_path):
+    """Saved on another action at another frame, the robot reads the same."""
+    other = tmp_path / "robot_waving.blend"
+    in_blender("""
+        import json, sys
+        import bpy
+        bpy.ops.wm.open_mainfile(filepath=sys.argv[1], load_ui=False, use_scripts=False)
+        arm = bpy.data.objects["RobotArmature"]
+        arm.animation_data.action = bpy.data.actions["Robot_Wave"]
+        bpy.context.scene.frame_set(40)
+        bpy.ops.wm.save_as_mainfile(filepath=sys.argv[2])
+        print(json.dumps({}))
+    """, ROBOT, other)
+    a = read_blend(blend_tree(tmp_path / "a", "robot", ROBOT))
+    b = read_blend(blend_tree(tmp_path / "b", "robot", other))
+    np.testing.assert_allclose(model_points(a), model_points(b), atol=1e-6)
+    assert "action 'Robot_Wave' at frame 40" in dict(b.metadata)["warning.armature"]
+
+
+@pytest.mark.blender
+@blender
+@corpus
+@pytest.mark.parametrize("extra, factor, axes", [
+    ('units = "cm"\n', 0.01, [0, 1, 2]),
+    ('scale = 0.1\n', 0.1, [0, 1, 2]),
+    ('units = "in"\nscale = 2.0\n', 0.0508, [0, 1, 2]),
+    ('up_axis = "Y"\n', 1.0, [0, 2, 1]),
+])
+def test_units_scale_and_up_axis_of_a_unitless_file(tmp_path, extra, factor, axes):
+    """The robot's scene has no unit system: Blender units are metres unless asset.toml
+    says otherwise."""
+    base = model_points(read_blend(blend_tree(tmp_path / "a", "robot", ROBOT)))
+    asset = read_blend(blend_tree(tmp_path / "b", "robot", ROBOT, extra))
+    size = np.ptp(model_points(asset), axis=0)
+    np.testing.assert_allclose(size, np.ptp(base, axis=0)[axes] * factor, rtol=1e-9)
+
+
+@pytest.mark.blender
+@blender
+def test_units_and_up_axis_move_joints_links_and_limits(fx):
+    """Millimetres, Y up: every length scaled, the model frame turned, joint axes and
+    rotations kept in their own frames, a prismatic joint's limits in metres."""
+    a = read_blend_path(fx / "full.blend", "full", "test", mass_kg=50.0)
+    b = read_blend_path(fx / "full.blend", "full", "test", mass_kg=50.0, units="mm", up_axis="Y")
+    turn = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    np.testing.assert_allclose(model_points(b), model_points(a) @ turn.T * 0.001, atol=1e-12)
+    for ja, jb in zip(a.joints, b.joints):
+        np.testing.assert_allclose(jb.pose[:3, :3], turn @ ja.pose[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(jb.pose[:3, 3], turn @ ja.pose[:3, 3] * 0.001, atol=1e-12)
+        np.testing.assert_array_equal(jb.axis, ja.axis)
+        if ja.type == "prismatic":
+            assert (jb.lower, jb.upper) == pytest.approx((ja.lower * 0.001, ja.upper * 0.001))
+        else:
+            assert (jb.lower, jb.upper) == (ja.lower, ja.upper)
+    assert [link.mass for link in b.links] == pytest.approx([link.mass for link in a.links])
+    assert dict(b.metadata)["units_m"] == "0.001 (asset.toml)" and dict(b.metadata)["up_axis"] == "Y (asset.toml)"
+
+
+@pytest.mark.blender
+@blender
+def test_unit_scale_of_the_scene_is_the_files_unit(tmp_path):
+    """A scene in millimetres (unit scale 0.001): a 2000-unit cube is 2 m."""
+    path = tmp_path / "mm.blend"
+    in_blender("""
+        import json, sys
+        import bpy
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        bpy.context.scene.unit_settings.system = "METRIC"
+        bpy.context.scene.unit_settings.scale_length = 0.001
+        bpy.ops.mesh.primitive_cube_add(size=2000.0, location=(0.0, 0.0, 1000.0))
+        bpy.ops.wm.save_as_mainfile(filepath=sys.argv[1])
+        print(json.dumps({}))
+    """, path)
+    asset = read_blend(blend_tree(tmp_path, "cube", path))
+    p = model_points(asset)
+    np.testing.assert_allclose([p.min(axis=0), p.max(axis=0)], [[-1.0, -1.0, 0.0], [1.0, 1.0, 2.0]], atol=1e-9)
+    assert dict(asset.metadata)["units_m"] == "0.001 (file)"
+    asset = read_blend(blend_tree(tmp_path / "over", "cube", path, 'units = "cm"\n'))  # asset.toml's unit wins
+    assert np.ptp(model_points(asset), axis=0) == pytest.approx([20.0, 20.0, 20.0])
+
+
+@pytest.mark.blender
+@blender
+@corpus
+def test_a_blender_5_file_with_saved_shape_key_values(tmp_path):
+    from pipeline.ingest.blend import header_version
+
+    assert header_version(APPLY) == (5, 0)  # the new BLENDER17-01 header
+    asset = read_blend(blend_tree(tmp_path, "apply", APPLY))
+    _, sub = _visual(asset, "modifier")
+    assert sub.mesh.triangle_count == 48  # its subdivision modifier applied, keys carried through it
+    for name in ("modifier", "no_modifier"):
+        (key,) = _visual(asset, name)[1].mesh.shape_keys
+        assert key.name == "Key 1" and key.vertices.shape == _visual(asset, name)[1].mesh.vertices.shape
+    notes = dict(asset.metadata)["notes"]
+    assert "no_modifier: shape key values Key 1=1 make its rest mesh" in notes
+    assert not any(k.startswith("warning.") for k, _ in asset.metadata)  # bpy 5.0 reads 5.0 files whole
+
+
+# A cube whose key "up" lifts its top face by 1, saved at 0.5, on a plain object, one
+# with a subdivision modifier, and one a shape binding drives.
+SAVED_KEYS = """
+    import json, sys
+    import bpy
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    for name, x in (("plain", 0.0), ("subdivided", 4.0), ("bound", 8.0)):
+        bpy.ops.mesh.primitive_cube_add(size=2.0, location=(x, 0.0, 1.0))
+        ob = bpy.context.object
+        ob.name = name
+        ob.shape_key_add(name="Basis")
+        key = ob.shape_key_add(name="up")
+        for p in key.data:
+            if p.co.z > 0:
+                p.co.z += 1.0
+        key.value = 0.5
+        if name == "subdivided":
+            ob.modifiers.new("sub", "SUBSURF").levels = 1
+        if name == "bound":
+            ob["state"], ob["state_effect"], ob["state_domain"] = "level", "shape", [0.0, 1.0]
+    bpy.ops.wm.save_as_mainfile(filepath=sys.argv[1])
+    print(json.dumps({}))
+"""
+
+
+@pytest.mark.blender
+@blender
+def test_saved_shape_key_values_make_the_rest_mesh_unless_a_binding_drives_them(tmp_path):
+    path = tmp_path / "keys.blend"
+    in_blender(SAVED_KEYS, path)
+    asset = read_blend(blend_tree(tmp_path, "keys", path))
+    top = {}
+    for name in ("plain", "subdivided", "bound"):
+        link, v = _visual(asset, name)
+        (key,) = v.mesh.shape_keys
+        world = (link.pose @ v.pose)
+        rest_z = (v.mesh.vertices @ world[:3, :3].T + world[:3, 3])[:, 2]
+        key_z = (key.vertices @ world[:3, :3].T + world[:3, 3])[:, 2]
+        top[name] = (rest_z.max(), key_z.max())
+    assert top["plain"] == pytest.approx((2.5, 3.0))  # the saved half-lift is the rest, "up" the full lift
+    assert top["bound"] == pytest.approx((2.0, 3.0))  # the binding sets the weight: rest at the basis
+    assert top["subdivided"][1] > top["subdivided"][0] > 2.0  # the half-lift, through the modifier
+    notes = dict(asset.metadata)["notes"]
+    assert "plain: shape key values up=0.5 make its rest mesh" in notes
+    assert "bound: shape key values up=0.5 left to its shape binding" in notes
+
+
+@pytest.mark.blender
+@blender
+@corpus
+def test_a_file_from_a_newer_blender_is_read_with_a_warning_that_reaches_the_user(tmp_path):
+    from pipeline.builder.run import source_warnings
+    from pipeline.builder.scheduler import BuildReport
+    from pipeline.builder.source_task import build_source
+    from pipeline.ingest.blend import header_version
+    from pipeline.validate.checks import check_asset
+
+    newer = tmp_path / "newer.blend"
+    newer.write_bytes(APPLY.read_bytes().replace(b"BLENDER17-01v0500", b"BLENDER17-01v0502", 1))
+    assert header_version(newer) == (5, 2)
+    cfg = blend_tree(tmp_path, "newer", newer)
+    asset = read_blend(cfg)
+    warning = dict(asset.metadata)["warning.blender_version"]
+    assert warning.startswith("saved by Blender 5.2 (file version 5.2.") and "newer than the Blender 5.0" in warning
+    assert [f.message for f in check_asset(asset) if f.code == "HIER013"] == [warning]
+    result = build_source(tmp_path / "staging", str(cfg.path))
+    assert result["warnings"] == [warning]
+    assert source_warnings(BuildReport(results={"source:newer": result})) == [f"newer: warning: {warning}"]

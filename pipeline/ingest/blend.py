@@ -218,7 +218,8 @@ def _unit_metres() -> float | None:
     import bpy
 
     units = bpy.context.scene.unit_settings
-    return None if units.system == "NONE" else float(units.scale_length)
+    # a single-precision property: its 7 digits, so 0.001 stays 0.001
+    return None if units.system == "NONE" else float(f"{units.scale_length:.7g}")
 
 
 def _listed(names: list[str], most: int = 5) -> str:
