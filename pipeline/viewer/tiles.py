@@ -131,8 +131,12 @@ def _cell(x0: float, y0: float, size: float, path: str) -> tuple[float, float, f
 
 
 def pack_file(pack: Pack) -> str:
-    """Where a pack's binary lives, relative to tiles/."""
-    return f"meshes/{pack.asset}.lod{pack.level}.bin"
+    return mesh_file(pack.asset, pack.level)
+
+
+def mesh_file(asset: str, level: int) -> str:
+    """Where a model's pack at a level keeps its binary, relative to tiles/."""
+    return f"meshes/{asset}.lod{level}.bin"
 
 
 def content_glb(path: Path, entries: list[tuple[Pack, np.ndarray, list[str]]], centre: np.ndarray) -> int:
@@ -252,7 +256,7 @@ def packs_of(out: Path, models: Path, manifests: dict[str, dict], memo=None) -> 
         digest = manifests[a].get("outputs", {}).get(glb)
         doc = binary = None
         for level in range(len(levels_of(manifests[a]))):
-            dest = out / f"meshes/{a}.lod{level}.bin"
+            dest = out / mesh_file(a, level)
             key = f"{a}\0{digest}\0{level}"
             if memo is not None and digest:
                 kept = memo[1].get(key)
