@@ -473,3 +473,115 @@ def test_twin_build_says_what_a_source_does_not_carry(tmp_path):
     assert [f["code"] for f in manifest["findings"]["source"] if f["code"] == "HIER013"] == ["HIER013"]
     bad = subprocess.run([*twin, "--memory-limit", "lots"], capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and "--memory-limit" in bad.stderr
+
+
+def collada(plain: bool = True, skinned: bool = True, doctype: str = "") -> str:
+    """A tetrahedron with corners 1 cm along each axis (<unit meter=0.01>, Y_UP), placed
+    as plain geometry and/or deformed by a one-joint skin controller."""
+    skin = """<library_controllers><controller id="c"><skin source="#g">
+ <bind_shape_matrix>1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1</bind_shape_matrix>
+ <source id="j"><Name_array id="ja" count="1">b</Name_array><technique_common><accessor source="#ja" count="1"
+  stride="1"><param name="JOINT" type="name"/></accessor></technique_common></source>
+ <source id="ibm"><float_array id="ibma" count="16">1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1</float_array><technique_common>
+  <accessor source="#ibma" count="1" stride="16"><param name="TRANSFORM" type="float4x4"/></accessor></technique_common>
+ </source>
+ <source id="w"><float_array id="wa" count="1">1</float_array><technique_common><accessor source="#wa" count="1"
+  stride="1"><param name="WEIGHT" type="float"/></accessor></technique_common></source>
+ <joints><input semantic="JOINT" source="#j"/><input semantic="INV_BIND_MATRIX" source="#ibm"/></joints>
+ <vertex_weights count="4"><input semantic="JOINT" source="#j" offset="0"/><input semantic="WEIGHT" source="#w"
+  offset="1"/><vcount>1 1 1 1</vcount><v>0 0 0 0 0 0 0 0</v></vertex_weights>
+</skin></controller></library_controllers>""" if skinned else ""
+    nodes = ('<node id="plain"><instance_geometry url="#g"/></node>' if plain else "") + (
+        '<node id="b" sid="b" type="JOINT"/><node id="rigged"><instance_controller url="#c">'
+        '<skeleton>#b</skeleton></instance_controller></node>' if skinned else "")
+    return f"""<?xml version="1.0" encoding="utf-8"?>{doctype}
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+<asset><unit meter="0.01" name="centimeter"/><up_axis>Y_UP</up_axis></asset>
+<library_geometries><geometry id="g"><mesh>
+ <source id="p"><float_array id="pa" count="12">0 0 0 1 0 0 0 1 0 0 0 1</float_array><technique_common><accessor
+  source="#pa" count="4" stride="3"><param name="X" type="float"/><param name="Y" type="float"/><param name="Z"
+  type="float"/></accessor></technique_common></source>
+ <vertices id="v"><input semantic="POSITION" source="#p"/></vertices>
+ <triangles count="4"><input semantic="VERTEX" source="#v" offset="0"/><p>0 2 1 0 1 3 0 3 2 1 2 3</p></triangles>
+</mesh></geometry></library_geometries>{skin}
+<library_visual_scenes><visual_scene id="s">{nodes}</visual_scene></library_visual_scenes>
+<scene><instance_visual_scene url="#s"/></scene>
+</COLLADA>"""
+
+
+def test_collada_controllers_are_said_and_plain_geometry_read(tmp_path):
+    (tmp_path / "both.dae").write_text(collada())
+    asset = read_mesh(cfg(tmp_path / "both.dae"))
+    (_, visual), = asset.visuals()
+    corners = {tuple(np.round(v, 9) + 0.0) for v in visual.mesh.vertices}
+    # centimetres, and Y up turned to Z up: (x, y, z) -> (x, -z, y)
+    assert corners == {(0.0, 0.0, 0.0), (0.01, 0.0, 0.0), (0.0, 0.0, 0.01), (0.0, -0.01, 0.0)}
+    assert dict(asset.metadata)["warning.controller"].startswith("COLLADA controllers (1 skin) are not carried")
+    (tmp_path / "skinned.dae").write_text(collada(plain=False))
+    with pytest.raises(UserError, match=r"skinned.dae: no triangles in the file \(COLLADA controllers \(1 skin\)"):
+        read_mesh(cfg(tmp_path / "skinned.dae"))
+
+
+@corpus
+def test_collada_animations_are_said(tmp_path):
+    text = POLE.read_text()
+    at = text.index("</asset>") + len("</asset>")
+    animation = """<library_animations><animation id="spin">
+ <source id="t"><float_array id="ta" count="2">0 1</float_array><technique_common><accessor source="#ta" count="2"
+  stride="1"><param name="TIME" type="float"/></accessor></technique_common></source>
+ <source id="a"><float_array id="aa" count="2">0 90</float_array><technique_common><accessor source="#aa" count="2"
+  stride="1"><param name="ANGLE" type="float"/></accessor></technique_common></source>
+ <sampler id="s"><input semantic="INPUT" source="#t"/><input semantic="OUTPUT" source="#a"/></sampler>
+ <channel source="#s" target="node/rotateZ.ANGLE"/></animation></library_animations>"""
+    (tmp_path / "pole.dae").write_text(text[:at] + animation + text[at:])
+    asset = read_mesh(cfg(tmp_path / "pole.dae"))
+    np.testing.assert_allclose(extents(asset), POLE_SIZE, rtol=1e-3)
+    assert carried(asset) == ["1 COLLADA animations are not carried: the model is read as it stands"]
+
+
+def test_hostile_mesh_files_are_refused_naming_the_file(tmp_path, capfd):
+    """Entities, paths out of the source's folder, meshes this reader would read as
+    zeros: each one clear error, nothing read from elsewhere, no trace printed."""
+    import base64
+    import json
+
+    secret = tmp_path / "secret.bin"
+    secret.write_bytes(b"\x00" * 64)
+    folder = tmp_path / "asset"
+    folder.mkdir()
+    dae = folder / "xxe.dae"
+    dae.write_text(collada(skinned=False, doctype=f'<!DOCTYPE C [<!ENTITY x SYSTEM "file://{secret}">]>'))
+    with pytest.raises(UserError, match="xxe.dae: COLLADA file declares a DOCTYPE"):
+        read_mesh(cfg(dae))
+
+    triangle = base64.b64encode(np.array([0, 0, 0, 1, 0, 0, 0, 1, 0], np.float32).tobytes()).decode()
+    doc = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                          "min": [0, 0, 0], "max": [1, 1, 0]}],
+           "bufferViews": [{"buffer": 0, "byteLength": 36}],
+           "buffers": [{"byteLength": 36, "uri": f"data:application/octet-stream;base64,{triangle}"}]}
+    cases = {
+        "outside.gltf": ({"buffers": [{"byteLength": 36, "uri": "../secret.bin"}]}, "leaves the file's folder"),
+        "image.gltf": ({"images": [{"uri": str(secret)}]}, r"images\[0\]: uri .* leaves the file's folder"),
+        "draco.gltf": ({"extensionsUsed": ["KHR_draco_mesh_compression"],
+                        "extensionsRequired": ["KHR_draco_mesh_compression"]}, "KHR_draco_mesh_compression"),
+        "meshopt.gltf": ({"extensionsUsed": ["EXT_meshopt_compression"],
+                          "extensionsRequired": ["EXT_meshopt_compression"]}, "EXT_meshopt_compression"),
+    }
+    (folder / "good.gltf").write_text(json.dumps(doc))
+    assert read_mesh(cfg(folder / "good.gltf")).triangle_count() == 1
+    for name, (changes, words) in cases.items():
+        (folder / name).write_text(json.dumps({**doc, **changes}))
+        with pytest.raises(UserError, match=f"{name}: .*{words}"):
+            read_mesh(cfg(folder / name))
+
+    obj = folder / "up.obj"
+    obj.write_text("mtllib ../materials.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(UserError, match="up.obj: mtllib: '../materials.mtl' leaves the file's folder"):
+        read_mesh(cfg(obj))
+    (folder / "m.mtl").write_text(f"newmtl a\nmap_Kd {secret}\n")
+    obj.write_text("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n")
+    with pytest.raises(UserError, match="m.mtl: map_Kd: .* leaves the file's folder"):
+        read_mesh(cfg(obj))
+    assert "Traceback" not in capfd.readouterr().err

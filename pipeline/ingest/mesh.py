@@ -236,10 +236,25 @@ def _unique(name: str, before: list[str]) -> str:
     return name
 
 
+def _decodable(path: Path, header: dict) -> None:
+    """Refuses meshes compressed only in a way trimesh cannot decode here: it would
+    read their placeholder zeros as the geometry."""
+    import importlib.util
+
+    lacking = {"EXT_meshopt_compression"}
+    if importlib.util.find_spec("DracoPy") is None:
+        lacking.add("KHR_draco_mesh_compression")
+    needed = sorted(lacking & set(header.get("extensionsRequired", [])))
+    if needed:
+        raise UserError(path, None, f"its meshes need {', '.join(needed)} to be decoded, which this reader "
+                                    "lacks: export the file without mesh compression")
+
+
 def gltf_facts(path: Path) -> Facts:
     """Metres, Y up; the morph targets; the animations and skins trimesh leaves out."""
     gltf = _gltf_header(path)
     header = gltf.header
+    _decodable(path, header)
     _check_images(path, header)
     facts = Facts(metres=None, up=None, default_up="Y")
     _morphs(path, gltf, facts)
@@ -348,7 +363,8 @@ def asset_from_trimesh(loaded, cfg, path: Path, frame: Frame, metadata: tuple[tu
             materials[mat.name] = with_textures(mat, textures)
         visuals.append(ir.Visual(vis_name, mat.name, (mesh,)))
     if not visuals:
-        raise UserError(path, None, "no triangles in the file")
+        left = facts.warnings.get("controller")
+        raise UserError(path, None, "no triangles in the file" + (f" ({left})" if left else ""))
     lost = sorted(set(facts.morphs) - carried)
     if lost:
         facts.warnings["morph_targets"] = f"morph targets of {', '.join(lost)} are not carried (their mesh was not read as stored)"
@@ -368,15 +384,15 @@ def _quiet_trimesh():
     what they cannot carry themselves."""
     import warnings
 
-    logger = logging.getLogger("trimesh")
-    before = logger.disabled
-    logger.disabled = True
+    logger = logging.getLogger("trimesh")  # its modules log through children of it
+    before = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             yield
     finally:
-        logger.disabled = before
+        logger.setLevel(before)
 
 
 def _load(path: Path, file_type: str | None = None):
