@@ -585,3 +585,14 @@ def test_hostile_mesh_files_are_refused_naming_the_file(tmp_path, capfd):
     with pytest.raises(UserError, match="m.mtl: map_Kd: .* leaves the file's folder"):
         read_mesh(cfg(obj))
     assert "Traceback" not in capfd.readouterr().err
+
+
+@pytest.mark.parametrize("ext", ["stl", "obj", "ply", "glb"])
+@pytest.mark.parametrize("extra, factor", [("", 1.0), ('units = "mm"\nscale = 2.0\n', 0.002), ('units = "ft"\n', 0.3048)])
+def test_each_mesh_format_in_a_sources_tree(tmp_path, ext, extra, factor):
+    """A 1 x 2 x 3 box: STL, OBJ and PLY declare nothing (metres, Z up), glTF is Y up."""
+    box = trimesh.creation.box((1.0, 2.0, 3.0))
+    box.export(tmp_path / f"box.{ext}")
+    cfg = asset_tree(tmp_path, "box", [tmp_path / f"box.{ext}"], f'category = "test"\nsource = "box.{ext}"\n{extra}')
+    size = np.array([1.0, 3.0, 2.0] if ext == "glb" else [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(extents(read(cfg)), size * factor, rtol=1e-9)
