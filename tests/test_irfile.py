@@ -113,3 +113,20 @@ def test_mesh_digest_follows_content_not_identity(tmp_path):
     irfile.write(tmp_path / "a.ir", asset)
     back, _ = irfile.read(tmp_path / "a.ir")
     assert [v.mesh.digest for _, v in back.visuals()] == [v.mesh.digest for _, v in asset.visuals()]
+
+
+def test_a_textured_asset_round_trips_its_images(tmp_path):
+    """Image bytes (a PNG and an image that is only bytes to the file) come back equal,
+    the material's other fields too: a textured source's task result is storable."""
+    png = b"\x89PNG\r\n\x1a\n" + bytes(range(256)) * 3
+    jpeg = b"\xff\xd8\xff" + b"\x00\x01" * 500
+    mat = ir.Material("painted", base_color=(1.0, 0.5, 0.25, 1.0), base_color_texture=ir.Texture("albedo", png),
+                      normal_texture=ir.Texture("bumps", jpeg))
+    asset = ir.Asset("t", "x", (ir.Link("l", visuals=(ir.Visual("v", "painted", (box_mesh(attributes=True),)),)),),
+                     materials=(mat,))
+    irfile.write(tmp_path / "a.ir", asset)
+    back, _ = irfile.read(tmp_path / "a.ir")
+    got = back.material("painted")
+    assert got.base_color_texture.data == png and got.normal_texture.data == jpeg
+    assert got.key() == mat.key() and got.normal_texture.mime == "image/jpeg"
+    assert irfile.dumps(back) == irfile.dumps(asset)

@@ -23,8 +23,8 @@ from ..errors import UserError
 
 MAGIC = b"TWINIR\x00\x01"
 _ALIGN = 8
-_CLASSES = {c.__name__: c for c in (ir.ShapeKey, ir.Mesh, ir.Material, ir.Visual, ir.Collision, ir.Link,
-                                    ir.Joint, ir.StateBinding, ir.LodInfo, ir.Asset)}
+_CLASSES = {c.__name__: c for c in (ir.ShapeKey, ir.Mesh, ir.Texture, ir.Material, ir.Visual, ir.Collision,
+                                    ir.Link, ir.Joint, ir.StateBinding, ir.LodInfo, ir.Asset)}
 _DTYPES = ("<f8", "<f4", "<i4", "<i8", "|u1", "|b1")
 
 
@@ -92,6 +92,9 @@ def _encode(x, arrays: list):
     if isinstance(x, np.ndarray):
         arrays.append(x)
         return {"$array": len(arrays) - 1}
+    if isinstance(x, bytes):  # a texture's image: raw bytes beside the arrays
+        arrays.append(np.frombuffer(x, dtype=np.uint8))
+        return {"$bytes": len(arrays) - 1}
     if isinstance(x, (list, tuple)):
         return [_encode(v, arrays) for v in x]
     if isinstance(x, dict):
@@ -113,6 +116,8 @@ def _decode(x, arrays: list):
     if isinstance(x, dict):
         if "$array" in x:
             return arrays[int(x["$array"])]
+        if "$bytes" in x:
+            return arrays[int(x["$bytes"])].tobytes()
         if "$map" in x:
             return {k: _decode(v, arrays) for k, v in x["$map"]}
         cls = _CLASSES[x["$"]]
