@@ -152,6 +152,22 @@ def test_a_pool_that_broke_between_two_waits_is_replaced(src, tmp_path):
     assert (out / "joined.txt").read_text() == "ALPHA+BETA"
 
 
+def test_a_build_ignores_sigpipe_while_it_runs(src, tmp_path):
+    """A worker's death leaves the pool's pipes to it without a reader: with SIGPIPE at
+    its default (gmsh's initialize resets it behind Python's back) writing to them
+    killed the whole process, pytest included, instead of failing the task."""
+    import signal
+
+    out = tmp_path / "build"
+    before = signal.signal(signal.SIGPIPE, signal.SIG_DFL)
+    try:
+        r = Scheduler(out, executor=in_process).run(_graph(src, out, upper_a=toy_graph.sigpipe_state))
+        assert r.results["upper:a"]["sigpipe_ignored"] is True
+        assert signal.getsignal(signal.SIGPIPE) == signal.SIG_DFL  # as it was, after the build
+    finally:
+        signal.signal(signal.SIGPIPE, before)
+
+
 @pytest.mark.parametrize("executor", ["pool", "in-process"])
 def test_running_out_of_memory_is_a_failure_not_a_trace(src, tmp_path, executor):
     out = tmp_path / "build"

@@ -73,6 +73,14 @@ def refuse(staging: Path, src: str, name: str, **_) -> dict:
     raise UserError(src, "line 1", "not a word")
 
 
+def sigpipe_state(staging: Path, src: str, name: str, **_) -> dict:
+    """upper's output, and whether the process that runs it ignores SIGPIPE (under the
+    in-process executor, the build's own process)."""
+    import signal
+
+    return {**upper(staging, src, name), "sigpipe_ignored": signal.getsignal(signal.SIGPIPE) == signal.SIG_IGN}
+
+
 def _cpus() -> list[int] | None:
     """The CPUs the task's process may run on (None where the OS does not say)."""
     return sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None

@@ -73,8 +73,11 @@ def failure_lines(report: BuildReport, traces: bool = False) -> list[str]:
     for behind, names in sorted(by_cause.items()):
         cause = f" (blocked by {', '.join(behind)})" if behind else " (the build stopped)"
         lines.append(f"not built: {', '.join(sorted(names))}{cause}")
+    stood_on: dict[tuple[str, ...], list[str]] = {}
     for why in report.explanations:
         if why.get("previous_of"):
-            lines.append(f"{why['task']}: made with the last good outputs of {', '.join(why['previous_of'])} "
-                         "(not made in this build)")
+            stood_on.setdefault(tuple(why["previous_of"]), []).append(why["task"])
+    for previous, names in sorted(stood_on.items()):
+        lines.append(f"made with the last good outputs of {', '.join(previous)} (not made in this build): "
+                     f"{', '.join(sorted(names))}")
     return lines

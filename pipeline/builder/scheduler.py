@@ -26,6 +26,7 @@ import shutil
 import sys
 import uuid
 from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Future, wait
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -177,7 +178,7 @@ class Scheduler:
         everything else still runs. `stop_on_error`: start nothing after a failure."""
         order = check_graph(tasks)
         report = BuildReport()
-        with BuildLock(self.build, notify=lambda m: print(m, file=sys.stderr)), self.cache.in_use():
+        with BuildLock(self.build, notify=lambda m: print(m, file=sys.stderr)), self.cache.in_use(), _pipes_ignored():
             shutil.rmtree(self.build / ".staging", ignore_errors=True)
             state = self._load_state()
             hasher = FileHasher(state.get("hashes"))
@@ -417,6 +418,25 @@ class Scheduler:
     def _tick(self, task: Task) -> None:
         if self.progress is not None:
             self.progress(task)
+
+
+@contextmanager
+def _pipes_ignored():
+    """SIGPIPE ignored for the build, as Python starts: a worker that dies leaves the
+    pool's pipes to it without a reader, and writing to them must be an error the pool
+    handles, not the end of the build. A library this process loaded may have reset
+    it behind Python's back (gmsh's initialize does)."""
+    import signal
+    import threading
+
+    if not hasattr(signal, "SIGPIPE") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGPIPE, before)
 
 
 def _as_failure(problem: Exception) -> dict:
