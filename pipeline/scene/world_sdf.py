@@ -1,11 +1,12 @@
 """The Gazebo world: SDF 1.9 with spherical coordinates, a sun, the terrain and every
 placement, each drawing the meshes of its model package (never one scene mesh).
 
-sdformat 12 (Gazebo Fortress) spends about 2.6 MB and, through an <include>, 16 ms on
-each <model> it parses, 0.85 MB on each <link>, 0.2 MB on a <visual> and 0.16 MB on a
-<collision>, whatever their content: a world of one model per placement cannot open
-on a 16 GB laptop. So the world keeps a model per placement only where the placement
-needs one, and groups the rest:
+sdformat 12 (Gazebo Fortress) copies the whole description of an element's kind into
+every <model>, <link>, <visual> and <collision> it parses, whatever they hold, a model
+costing most and an <include> parsing the model's file again: its memory grows with
+the count of those elements, and a world of one model per placement does not open on
+a laptop. So the world keeps a model per placement only where the placement needs one,
+and groups the rest:
 
 - an <include> of the placement's LOD variant for an articulated asset (its joints
   move) or one a state binding drives (the runtime swaps the include's URI);
@@ -62,8 +63,8 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     _text(sph, "heading_deg", "0")
 
     # gz-sim hands <dart><collision_detector> to dartsim (SdfEntityCreator, Physics).
-    # Bullet's broadphase keeps the sample's static shapes at a real-time factor of about
-    # 1.7 where dartsim's default (ODE) manages about 0.6 on this machine (tools/gzprobe).
+    # dartsim's default (ODE) updates every static shape each step; bullet's broadphase
+    # keeps a site of static equipment above real time (tools/gzprobe --physics).
     physics = etree.SubElement(world, "physics", name="dart_bullet", type="dart", default="true")
     _text(physics, "max_step_size", "0.001")
     _text(physics, "real_time_factor", "1")
