@@ -143,7 +143,8 @@ def run(scenario: Path, out: Path):
 @user_errors
 def render(scenario: Path | None, study: bool, out: Path):
     """Render image sets with labels and the study's image metrics."""
-    from .runtime.render import render_scenario, render_study
+    from .runtime.render.scenario import render_scenario
+    from .runtime.render.study import render_study
 
     if study:
         render_study(out)

@@ -209,14 +209,14 @@ def test_the_study_runs_on_the_sites_clock(tmp_path):
     from zoneinfo import ZoneInfo
 
     from pipeline.errors import UserError
-    from pipeline.runtime import render
+    from pipeline.runtime.render import site as render_site, study
 
-    site = render.Site(tmp_path, [], {}, (31.0, 121.0, 0.0), "2025-06-21", zone=ZoneInfo("Asia/Shanghai"))
-    times = dict(render.study_times(site))
+    site = render_site.Site(tmp_path, [], {}, (31.0, 121.0, 0.0), "2025-06-21", zone=ZoneInfo("Asia/Shanghai"))
+    times = dict(study.study_times(site))
     assert times["early_morning"].isoformat() == "2025-06-21T06:45:00+08:00"
     noon = times["solar_noon"]
     assert noon.utcoffset() == dt.timedelta(hours=8) and dt.time(11, 50) < noon.time() < dt.time(12, 5)
     assert sun.ephemeris(31.0, 121.0, noon)[0] > 80.0
     site.zone = None
     with pytest.raises(UserError, match=r"\[site\] timezone"):
-        render.study_times(site)
+        study.study_times(site)

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.runtime import render as r
+from pipeline.runtime.render import frames, gauge, sensor, study
+from pipeline.runtime.render import site as render_site
 
 ROOT = Path(__file__).resolve().parent.parent
 BUILD = ROOT / "build"
@@ -89,16 +90,16 @@ def test_oil_leak_scenario_runs_on_the_sample(sample):
 
 # --- render-in-the-loop on the built sample ---------------------------------------
 
-TINY = r.PhoneCamera(width=64, height=48, samples=4)
-SMALL = r.PhoneCamera(width=128, height=96, samples=4)  # the history test's frame: it showed the bug
+TINY = sensor.PhoneCamera(width=64, height=48, samples=4)
+SMALL = sensor.PhoneCamera(width=128, height=96, samples=4)  # the history test's frame: it showed the bug
 
 
 def test_frames_labels_and_determinism(sample, tmp_path):
-    site = r.load_site(sample)
-    shots = dict(r.study_shots(site))
+    site = render_site.load_site(sample)
+    shots = dict(study.study_shots(site))
     night, noon = shots["midnight"], shots["early_morning"]  # the white dial in direct sun
-    a = r.render_shots(site, [noon], tmp_path / "a", cam=TINY, seed=7)[0]
-    b = r.render_shots(site, [noon], tmp_path / "b", cam=TINY, seed=7)[0]
+    a = frames.render_shots(site, [noon], tmp_path / "a", cam=TINY, seed=7)[0]
+    b = frames.render_shots(site, [noon], tmp_path / "b", cam=TINY, seed=7)[0]
     assert a["sha256"] == b["sha256"] and np.array_equal(a["rgb"], b["rgb"])
     labels = json.loads((tmp_path / "a" / "frame_0000.json").read_text())
     g = labels["gauges"]["gauge_tank"]
@@ -110,20 +111,20 @@ def test_frames_labels_and_determinism(sample, tmp_path):
     ys, xs = np.nonzero(gray >= np.percentile(gray, 90))
     inside = (xs >= x0) & (xs <= x1) & (ys >= y0) & (ys <= y1)
     assert inside.mean() > 0.6
-    dark = r.render_shots(site, [night], tmp_path / "n", cam=TINY, seed=7)[0]
+    dark = frames.render_shots(site, [night], tmp_path / "n", cam=TINY, seed=7)[0]
     assert float((dark["rgb"].mean(axis=2) > 240).mean()) == 0.0
 
 
 def test_denoised_frame_is_the_same_in_a_fresh_process(sample, tmp_path):
     """OIDN on the CPU: a frame rendered in another process has the same pixels."""
-    site = r.load_site(sample)
-    noon = dict(r.study_shots(site))["solar_noon"]
+    site = render_site.load_site(sample)
+    noon = dict(study.study_shots(site))["solar_noon"]
     assert TINY.render_denoise
-    here = r.render_shots(site, [noon], tmp_path / "here", cam=TINY, seed=3)[0]["sha256"]
-    script = ("import json, sys; from pathlib import Path; from pipeline.runtime import render as r; "
-              "site = r.load_site(Path(sys.argv[1])); shot = dict(r.study_shots(site))['solar_noon']; "
-              "cam = r.PhoneCamera(**json.loads(sys.argv[3])); "
-              "print('SHA', r.render_shots(site, [shot], Path(sys.argv[2]), cam=cam, seed=3)[0]['sha256'])")
+    here = frames.render_shots(site, [noon], tmp_path / "here", cam=TINY, seed=3)[0]["sha256"]
+    script = ("import json, sys; from pathlib import Path; from pipeline.runtime.render import frames, sensor, site as s, study; "
+              "site = s.load_site(Path(sys.argv[1])); shot = dict(study.study_shots(site))['solar_noon']; "
+              "cam = sensor.PhoneCamera(**json.loads(sys.argv[3])); "
+              "print('SHA', frames.render_shots(site, [shot], Path(sys.argv[2]), cam=cam, seed=3)[0]['sha256'])")
     proc = subprocess.run([sys.executable, "-c", script, str(sample), str(tmp_path / "there"),
                            json.dumps(dataclasses.asdict(TINY))], capture_output=True, text=True, timeout=600)
     there = next(x.split()[1] for x in proc.stdout.splitlines() if x.startswith("SHA "))
@@ -132,13 +133,13 @@ def test_denoised_frame_is_the_same_in_a_fresh_process(sample, tmp_path):
 
 def test_a_frame_does_not_depend_on_the_frames_before_it(sample, tmp_path):
     """Night (lamps on, sun off), then noon: the noon frame equals noon rendered alone."""
-    site = r.load_site(sample)
-    shots = dict(r.study_shots(site))
-    alone = r.render_shots(site, [shots["solar_noon"]], tmp_path / "a", cam=SMALL, seed=5, gain=1.0)
-    after = r.render_shots(site, [shots["midnight"], shots["solar_noon"], shots["midnight"]], tmp_path / "b",
+    site = render_site.load_site(sample)
+    shots = dict(study.study_shots(site))
+    alone = frames.render_shots(site, [shots["solar_noon"]], tmp_path / "a", cam=SMALL, seed=5, gain=1.0)
+    after = frames.render_shots(site, [shots["midnight"], shots["solar_noon"], shots["midnight"]], tmp_path / "b",
                            cam=SMALL, seed=5, gain=1.0)
     assert after[1]["sha256"] == alone[0]["sha256"]
-    first = r.render_shots(site, [shots["midnight"]], tmp_path / "c", cam=SMALL, seed=5, gain=1.0)
+    first = frames.render_shots(site, [shots["midnight"]], tmp_path / "c", cam=SMALL, seed=5, gain=1.0)
     assert after[2]["sha256"] == after[0]["sha256"] == first[0]["sha256"]
 
 
@@ -147,7 +148,7 @@ def test_study_table(sample, tmp_path):
 
     shutil.copytree(sample / "scene", tmp_path / "scene")
     (tmp_path / "models").symlink_to((sample / "models").resolve())
-    r.render_study(tmp_path, cam=r.PhoneCamera())  # the study's own frame: H needs its pixels
+    study.render_study(tmp_path, cam=sensor.PhoneCamera())  # the study's own frame: H needs its pixels
     report = json.loads((tmp_path / "reports" / "study.json").read_text())
     names = [c["condition"] for c in report["conditions"]]
     # A day's order from the first light in which the pointer is visible (H_ref).
@@ -169,11 +170,11 @@ def test_study_table(sample, tmp_path):
 def test_study_viewpoint_faces_the_late_sun_with_a_clear_view(sample):
     """Bank B's gauges face ENE: the study camera looks WSW, the late sun within ~25 deg
     of its axis and not hidden by a built model."""
-    site = r.load_site(sample)
-    shots = dict(r.study_shots(site))
+    site = render_site.load_site(sample)
+    shots = dict(study.study_shots(site))
     late = shots["late_afternoon"]
     axis = -late.cam_pose[:3, 2]
     assert math.degrees(math.acos(float(axis @ late.sun_dir))) < 25.0
-    assert not r._blocked(site, late.cam_pose[:3, 3], late.sun_dir, 300.0)
-    centre, normal = r.dial_world(site.pose(site.placement(r.STUDY_TARGET)))
-    assert float(-axis @ normal) > math.cos(r.STUDY_MAX_OBLIQUITY) - 1e-9
+    assert not study._blocked(site, late.cam_pose[:3, 3], late.sun_dir, 300.0)
+    centre, normal = gauge.dial_world(site.pose(site.placement(study.STUDY_TARGET)))
+    assert float(-axis @ normal) > math.cos(study.STUDY_MAX_OBLIQUITY) - 1e-9

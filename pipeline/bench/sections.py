@@ -192,7 +192,7 @@ def runtime_section(ctx: Context) -> dict:
 
 # --- render --------------------------------------------------------------------------
 
-RENDER_SCRIPT = ("import json, sys; from pathlib import Path; from pipeline.runtime.render import bench_render; "
+RENDER_SCRIPT = ("import json, sys; from pathlib import Path; from pipeline.bench.render import bench_render; "
                  "r = bench_render(Path(sys.argv[1]), int(sys.argv[2]), sources=Path(sys.argv[3]), "
                  "setup=sys.argv[4], reference=Path(sys.argv[5])); print('BENCH_JSON ' + json.dumps(r))")
 

@@ -1,0 +1,337 @@
+"""The Cycles scene (bpy): built packages imported through Blender's glTF importer,
+the sky, sun, moon and floodlights, and the camera; one frame at a time.
+
+bpy is imported only when a scene is made: the rest of the renderer runs without it.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .. import sun as sun_model
+from .gauge import POINTER
+from .pinhole import look_at, project
+from .sensor import PhoneCamera
+from .site import Shot, Site
+
+class CyclesScene:
+    """One Cycles scene: imported packages, lights, camera. Packages are imported once
+    per asset; more placements of it share its meshes (linked copies), except meshes with
+    shape keys, which are per instance (their weights are)."""
+
+    SKY_SCALE = 7.0  # Blender's sky texture -> W/m2/sr (clear-sky DHI ~120 W/m2 at 60 deg)
+    NIGHT_AMBIENT = 2e-4  # W/m2/sr: airglow and light pollution
+    MOON = {"elevation": math.radians(50.0), "azimuth": math.radians(80.0), "irradiance": 2.5e-3}
+    LAMP_W = 5000.0  # W (radiant) per floodlight head, spot 70 degrees
+    THREADS = 2
+
+    def __init__(self, site: Site, cam: PhoneCamera, seed: int):
+        import bpy
+
+        self.bpy, self.site, self.cam = bpy, site, cam
+        self.lamps: list = []
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        s = self.scene = bpy.context.scene
+        s.render.engine = "CYCLES"
+        s.cycles.device = "CPU"
+        s.cycles.samples = cam.samples
+        s.cycles.seed = int(seed) % (2**31)
+        s.cycles.use_animated_seed = False
+        s.cycles.use_adaptive_sampling = False
+        s.cycles.use_denoising = bool(cam.render_denoise)
+        if cam.render_denoise:
+            s.cycles.denoiser = "OPENIMAGEDENOISE"
+            s.cycles.denoising_quality = cam.render_denoise
+            s.cycles.denoising_prefilter = "FAST"  # guides from the first hit: clean enough here
+            s.cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+            s.cycles.denoising_use_gpu = False  # same pixels on every machine
+        # Blender's factory light paths (12 bounces, caustics, light tree): cutting them to
+        # 2-4 bounces without caustics left the noon close-up 9 % darker than a converged
+        # render (8-bit RMS error 10.8 against 3.5 at 4 samples + OIDN) and saved only a
+        # tenth of the time. The floodlights are off while the sun is up (set_shot).
+        s.render.threads_mode = "FIXED"
+        s.render.threads = self.THREADS
+        s.render.resolution_x, s.render.resolution_y = cam.width, cam.height
+        s.render.resolution_percentage = 100
+        # Cycles' persistent data would keep the BVH between frames (0.1-0.3 s a frame here),
+        # but a night frame (lamps on, sun off) rendered after a day frame came out with other
+        # pixels than the same frame rendered first: a frame must not depend on its history.
+        s.render.use_persistent_data = False
+        s.view_settings.view_transform = "Standard"
+        s.render.image_settings.file_format = "OPEN_EXR"
+        s.render.image_settings.color_depth = "32"
+        self.roots: dict[str, object] = {}  # tag -> root object
+        self.objects: dict[str, dict[str, object]] = {}  # tag -> visual name -> object
+        self.prototypes: dict[str, str] = {}  # asset -> tag imported first
+        self._world()
+        self._camera()
+        self.tmp = Path(tempfile.mkdtemp(prefix="twin_render_"))
+
+    def close(self):
+        shutil.rmtree(self.tmp, ignore_errors=True)
+
+    def _world(self):
+        bpy = self.bpy
+        w = bpy.data.worlds.new("sky")
+        self.scene.world = w
+        w.use_nodes = True
+        w.cycles.sampling_method = "MANUAL"  # the automatic 1024 map costs seconds per sky
+        w.cycles.sample_map_resolution = 64
+        nt = w.node_tree
+        self.sky = nt.nodes.new("ShaderNodeTexSky")
+        self.sky.sky_type = "MULTIPLE_SCATTERING"
+        self.sky.sun_disc = False  # the sun lamp lights; the disc would only add noise
+        amb = nt.nodes.new("ShaderNodeBackground")
+        amb.inputs["Strength"].default_value = self.NIGHT_AMBIENT
+        amb.inputs["Color"].default_value = (0.6, 0.7, 1.0, 1.0)
+        bg = nt.nodes["Background"]
+        nt.links.new(self.sky.outputs["Color"], bg.inputs["Color"])
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(bg.outputs[0], add.inputs[0])
+        nt.links.new(amb.outputs[0], add.inputs[1])
+        nt.links.new(add.outputs[0], nt.nodes["World Output"].inputs["Surface"])
+        self.sky_bg = bg
+        self.sun = self._sun_lamp("sun", 0.0093)  # the sun's angular diameter, rad
+        self.moon = self._sun_lamp("moon", 0.009)
+
+    def _sun_lamp(self, name: str, angle: float):
+        bpy = self.bpy
+        ob = bpy.data.objects.new(name, bpy.data.lights.new(name, "SUN"))
+        ob.data.angle = angle
+        self.scene.collection.objects.link(ob)
+        return ob
+
+    def _camera(self):
+        bpy = self.bpy
+        self.camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+        self.camera.data.sensor_fit = "HORIZONTAL"
+        self.scene.collection.objects.link(self.camera)
+        self.scene.camera = self.camera
+
+    # -- content
+    def load(self, tag: str) -> None:
+        """Import a placement's built package (glTF) and put it at its ENU pose."""
+        if tag in self.roots:
+            return
+        p = self.site.placement(tag)
+        glb = self.site.build / "models" / p["asset"] / f"{p['asset']}.glb"
+        if p["asset"] in self.prototypes:
+            root, objs = self._copy(self.roots[self.prototypes[p["asset"]]])
+        else:
+            root, objs = self._import(glb)
+            self.prototypes[p["asset"]] = tag
+        root.matrix_world = _matrix(self.bpy, self.site.pose(p))
+        # Children's world matrices are stale until the view layer updates; setting one
+        # before that would be relative to the parent's old pose.
+        self.bpy.context.view_layer.update()
+        self.roots[tag], self.objects[tag] = root, objs
+
+    def load_terrain(self) -> None:
+        if self.site.terrain and "__terrain__" not in self.roots:
+            root, objs = self._import(self.site.build / "models" / self.site.terrain / f"{self.site.terrain}.glb")
+            self.roots["__terrain__"], self.objects["__terrain__"] = root, objs
+
+    def _import(self, glb: Path):
+        bpy = self.bpy
+        before = set(bpy.data.objects)
+        bpy.ops.import_scene.gltf(filepath=str(glb))
+        new = [o for o in bpy.data.objects if o not in before]
+        # Blender imports MSFT_lod's out-of-scene nodes as extra roots at the origin:
+        # close-ups draw LOD 0, so the lower levels go
+        lower = [o for o in new if LOD_NODE.search(_base_name(o.name))]
+        new = [o for o in new if o not in lower]
+        for o in lower:
+            bpy.data.objects.remove(o, do_unlink=True)
+        glass = {m.name for m in {sl.material for o in new for sl in o.material_slots if sl.material is not None}
+                 if _tune_material(m)}
+        for o in new:
+            # A thin pane passes ~92 % of the light: shadow rays ignore it, so the dial
+            # behind gets direct light (through a transparent shader they would be
+            # sampled less well: twice the noise, half the light, measured at 16 samples).
+            if any(sl.material is not None and sl.material.name in glass for sl in o.material_slots):
+                o.visible_shadow = False
+        root = next(o for o in new if o.parent is None)
+        objs = {_base_name(o.name): o for o in new}
+        return root, objs
+
+    def _copy(self, root):
+        """Linked duplicate of an imported hierarchy; shape-keyed meshes get own data."""
+        mapping = {}
+        for o in [root, *root.children_recursive]:
+            c = o.copy()
+            if o.type == "MESH" and o.data.shape_keys is not None:
+                c.data = o.data.copy()
+            self.scene.collection.objects.link(c)
+            mapping[o] = c
+        for o, c in mapping.items():
+            if o.parent is not None:
+                c.parent = mapping[o.parent]
+                c.matrix_parent_inverse = o.matrix_parent_inverse.copy()
+        return mapping[root], {_base_name(o.name): c for o, c in mapping.items()}
+
+    def add_lamps(self, tags: list[str]) -> None:
+        """Floodlights of the lighting poles as spot lights (the poles' meshes are loaded
+        only if the camera sees them): one per emissive lens, shining out of its face."""
+        bpy = self.bpy
+        for tag in tags:
+            p = self.site.placement(tag)
+            m = self.site.manifests[p["asset"]]
+            for link in m["links"]:
+                for v in link["visuals"]:
+                    if v["material"] != "lamp_white":
+                        continue
+                    pose = self.site.pose(p) @ np.array(link["pose"]).reshape(4, 4) @ np.array(v["pose"]).reshape(4, 4)
+                    beam = pose[:3, :3] @ np.array([0.0, -1.0, 0.0])
+                    light = bpy.data.lights.new(f"{tag}_{v['name']}", "SPOT")
+                    light.energy = self.LAMP_W
+                    light.spot_size = math.radians(70.0)
+                    light.color = (1.0, 0.95, 0.85)
+                    ob = bpy.data.objects.new(light.name, light)
+                    ob.matrix_world = _matrix(bpy, look_at(pose[:3, 3] + beam * 0.05, pose[:3, 3] + beam))
+                    self.scene.collection.objects.link(ob)
+                    self.lamps.append(ob)
+
+    # -- per frame
+    def set_shot(self, shot: Shot, pointer_binding: dict | None) -> None:
+        bpy = self.bpy
+        cam = self.camera
+        cam.matrix_world = _matrix(bpy, shot.cam_pose)
+        cam.data.angle = shot.lens.hfov
+        cam.data.clip_start, cam.data.clip_end = shot.lens.near, shot.lens.far
+        self._set_sky(shot)
+        for vs in shot.visual_states:
+            objs = self.objects.get(vs.tag)
+            if objs is None or vs.visual not in objs:
+                continue
+            ob = objs[vs.visual]
+            link = self._link_pose(vs.tag, vs.link)
+            ob.matrix_world = _matrix(bpy, self.site.pose(self.site.placement(vs.tag)) @ link @ vs.transform)
+            for key, weight in vs.shape_weights.items():
+                if ob.data.shape_keys is not None and key in ob.data.shape_keys.key_blocks:
+                    ob.data.shape_keys.key_blocks[key].value = weight
+            if vs.material is not None and vs.material in bpy.data.materials and ob.material_slots:
+                ob.material_slots[0].material = bpy.data.materials[vs.material]
+
+    def _link_pose(self, tag: str, link: str) -> np.ndarray:
+        m = self.site.manifests[self.site.placement(tag)["asset"]]
+        for rec in m["links"]:
+            if rec["name"] == link:
+                return np.array(rec["pose"]).reshape(4, 4)
+        return np.eye(4)
+
+    def _set_sky(self, shot: Shot) -> None:
+        bpy = self.bpy
+        self.sky.sun_elevation = shot.sun_elevation
+        # Blender's sky rotation is counter-clockwise from +Y about +Z; azimuth is clockwise.
+        self.sky.sun_rotation = -shot.sun_azimuth
+        self.sky_bg.inputs["Strength"].default_value = self.SKY_SCALE
+        up = shot.sun_elevation > 0
+        self.sun.hide_render = not up
+        self.sun.data.energy = shot.dni  # W/m2 normal to the rays: Cycles' sun unit
+        self.sun.matrix_world = _matrix(bpy, look_at(shot.sun_dir, (0.0, 0.0, 0.0)))
+        moon = self.MOON
+        self.moon.hide_render = up
+        for lamp in self.lamps:  # photocell floodlights: on from sunset to sunrise
+            lamp.hide_render = up
+        self.moon.data.energy = moon["irradiance"]
+        mdir = sun_model.direction_enu(moon["elevation"], moon["azimuth"])
+        self.moon.matrix_world = _matrix(bpy, look_at(mdir, (0.0, 0.0, 0.0)))
+
+    def pointer_rows(self, tag: str, cam_pose: np.ndarray, k: dict) -> float | None:
+        """Row extent (px) of the pointer's projected vertices: the true H numerator."""
+        ob = self.objects.get(tag, {}).get(POINTER)
+        if ob is None:
+            return None
+        self.bpy.context.view_layer.update()
+        m = np.array(ob.matrix_world)
+        v = np.array([tuple(x.co) for x in ob.data.vertices], float)
+        uv = project(v @ m[:3, :3].T + m[:3, 3], cam_pose, k)
+        return float(np.nanmax(uv[:, 1]) - np.nanmin(uv[:, 1]))
+
+    def sun_visible(self, eye: np.ndarray, sun_dir: np.ndarray) -> bool:
+        """Is the sun unobstructed from the lens (for the veiling glare)?"""
+        from mathutils import Vector
+
+        dg = self.bpy.context.evaluated_depsgraph_get()
+        hit = self.scene.ray_cast(dg, Vector(eye + sun_dir * 0.01), Vector(sun_dir))[0]
+        return not hit
+
+    def render(self, width: int | None = None, height: int | None = None, samples: int | None = None) -> np.ndarray:
+        """(h, w, 3) float32 linear radiance, top row first."""
+        bpy, s = self.bpy, self.scene
+        s.render.resolution_x = width or self.cam.width
+        s.render.resolution_y = height or self.cam.height
+        s.cycles.samples = samples or self.cam.samples
+        path = self.tmp / "frame.exr"
+        s.render.filepath = str(path)
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(str(path))
+        px = np.empty(len(img.pixels), dtype=np.float32)
+        img.pixels.foreach_get(px)
+        w, h = img.size
+        bpy.data.images.remove(img)
+        return px.reshape(h, w, 4)[::-1, :, :3].copy()
+
+
+LOD_NODE = re.compile(r"__lod[1-9][0-9]*$")  # export/gltf.py names lower LODs so
+GLASS_ALPHA_MAX = 0.5  # glTF alpha at or below which a material is a window, not a tint
+
+
+def _tune_material(mat) -> bool:
+    """Imported glTF materials for Cycles: window glass as clear glass (below); every
+    Principled BSDF with single-scatter GGX (multiscatter cost a third of a 16-sample
+    frame; bench_render's reference makes the same choice, so its error leaves this out)."""
+    if not mat.node_tree:
+        return False
+    for n in mat.node_tree.nodes:
+        if n.type == "BSDF_PRINCIPLED":
+            n.distribution = "GGX"
+    return _clear_glass(mat)
+
+
+def _clear_glass(mat) -> bool:
+    """A window material (glTF alpha <= GLASS_ALPHA_MAX, as the gauge glass's 0.25) as a
+    thin clear pane of IOR 1.5, roughness 0: Fresnel-weighted specular reflection (4 %
+    head-on, more at grazing angles) over full transmission without refraction offset
+    (thin-walled). The glTF alpha blend keeps a 75 % diffuse share that greys the dial
+    and pointer out; a refracting solid would need caustics to let the sun through.
+    Transparent shadows let the sun reach the dial, as through real glass. Tinted
+    see-through materials (the oil column, alpha 0.9) stay as imported."""
+    if not mat.node_tree:
+        return False
+    bsdf = next((n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+    if bsdf is None or bsdf.inputs["Alpha"].is_linked or bsdf.inputs["Alpha"].default_value > GLASS_ALPHA_MAX:
+        return False
+    nt = mat.node_tree
+    rough = bsdf.inputs["Roughness"].default_value
+    for n in list(nt.nodes):
+        if n.type != "OUTPUT_MATERIAL":
+            nt.nodes.remove(n)
+    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    fresnel, mix = nt.nodes.new("ShaderNodeFresnel"), nt.nodes.new("ShaderNodeMixShader")
+    fresnel.inputs["IOR"].default_value = 1.5
+    clear, gloss = nt.nodes.new("ShaderNodeBsdfTransparent"), nt.nodes.new("ShaderNodeBsdfGlossy")
+    gloss.inputs["Roughness"].default_value = 0.0 if rough <= 0.1 else rough
+    nt.links.new(fresnel.outputs[0], mix.inputs[0])
+    nt.links.new(clear.outputs[0], mix.inputs[1])
+    nt.links.new(gloss.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    return True
+
+
+def _base_name(name: str) -> str:
+    """Blender appends .001 to repeated names; the package's names are without it."""
+    head, dot, tail = name.rpartition(".")
+    return head if dot and tail.isdigit() else name
+
+
+def _matrix(bpy, m: np.ndarray):
+    from mathutils import Matrix
+
+    return Matrix([list(map(float, row)) for row in np.asarray(m)])

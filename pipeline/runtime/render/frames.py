@@ -1,0 +1,153 @@
+"""Rendering a sequence of shots in one Cycles scene: each frame developed by the phone
+model and written with its labels (what was rendered, in numbers)."""
+
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .cycles import CyclesScene
+from .gauge import POINTER, gauge_box, pointer_angle
+from .pinhole import cull, intrinsics
+from .sensor import PhoneCamera, develop, metered_gain, metered_white_balance, veil_radiance
+from .site import Shot, Site
+
+def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, pointer_binding: dict | None) -> dict:
+    """Labels of one frame: what was rendered, in numbers."""
+    pose = shot.cam_pose
+    target_pose = site.pose(site.placement(shot.target))
+    levels = shot.states.get(shot.target, {})
+    level = levels.get("oil_level_tank")
+    gauges = {"gauge_tank": gauge_box(target_pose, pose, k)}
+    return {
+        "time": shot.when.isoformat(),
+        "time_utc": shot.when.astimezone(dt.timezone.utc).isoformat(),
+        "sun": {"azimuth_deg": math.degrees(shot.sun_azimuth), "elevation_deg": math.degrees(shot.sun_elevation),
+                "irradiance_w_m2": shot.irradiance, "direct_normal_w_m2": shot.dni},
+        "camera": {"zoom": shot.lens.zoom, "near": shot.lens.near, "far": shot.lens.far, **k,
+                   "pose": [float(v) for v in pose.reshape(16)], "convention": "camera looks down -Z, +Y up; ENU",
+                   "exposure_gain": gain, "veil": veil},
+        "target": shot.target,
+        "oil_levels": {v: float(x) for v, x in sorted(levels.items())},
+        "pointer_angle_rad": pointer_angle(level, pointer_binding) if level is not None and pointer_binding else None,
+        "gauges": gauges,
+    }
+
+
+def measure(bgr_crop: np.ndarray, bgr_face: np.ndarray) -> dict:
+    """The study's C and S of a gauge crop and the pointer extent (px) on its dial face
+    alone (runtime/perception.py): the crop's corners hold bezel and its shadows, which
+    the region's convex hull would otherwise take for pointer pixels."""
+    import cv2
+
+    from .. import perception
+
+    gray = cv2.cvtColor(np.ascontiguousarray(bgr_crop), cv2.COLOR_BGR2GRAY)
+    h, w = bgr_face.shape[:2]
+    return {"C": perception.rms_contrast(gray), "S": perception.high_intensity_ratio(gray),
+            "extent_px": float(perception.pointer_height(bgr_face, (0, 0, w, h)))}
+
+
+def _sha(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def write_png(path: Path, rgb: np.ndarray) -> str:
+    """PNG without timestamps (OpenCV writes none), returns its sha256."""
+    import cv2
+
+    ok, buf = cv2.imencode(".png", rgb[..., ::-1])
+    if not ok:
+        raise RuntimeError(f"could not encode {path}")
+    data = buf.tobytes()
+    path.write_bytes(data)
+    return _sha(data)
+
+
+def write_json(path: Path, data) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, sort_keys=True, indent=1, allow_nan=False) + "\n")
+    tmp.replace(path)
+
+
+
+
+def pointer_binding(site: Site, tag: str) -> dict | None:
+    m = site.manifests.get(site.placement(tag)["asset"], {})
+    return next((b for b in m.get("bindings", []) if b["target"] == POINTER and b["effect"] == "rotate"), None)
+
+
+def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamera, seed: int,
+                 gain: float | None = None, names: list[str] | None = None, meter_each: bool = False) -> list[dict]:
+    """Render shots into folder/<name>.png + <name>.json; one scene (loaded once, kept
+    between frames), exposure locked at the first shot unless `gain` is given or
+    `meter_each` (the phone re-meters every shot). Returns one record per frame."""
+    folder.mkdir(parents=True, exist_ok=True)
+    lock = (gain, (1.0, 1.0, 1.0)) if gain is not None else None
+    bl = CyclesScene(site, cam, seed)
+    try:
+        populate(bl, site, shots)
+        records = []
+        for i, shot in enumerate(shots):
+            records.append(_one(bl, site, shot, folder, (names or [])[i] if names else f"frame_{i:04d}",
+                                cam, lock))
+            if lock is None and not meter_each:
+                c = records[-1]["labels"]["camera"]
+                lock = (c["exposure_gain"], c["white_balance"])
+        return records
+    finally:
+        bl.close()
+
+
+def populate(bl: CyclesScene, site: Site, shots: list[Shot]) -> None:
+    """Load what any shot's camera sees or what shadows into it, the targets at least,
+    and the lighting poles near the targets as lamps."""
+    spheres = site.spheres()
+    wanted = {s.target for s in shots}
+    for shot in shots:
+        k = intrinsics(shot.lens.hfov, bl.cam.width, bl.cam.height)
+        dist = float(np.linalg.norm(site.pose(site.placement(shot.target))[:3, 3] - shot.cam_pose[:3, 3]))
+        far = min(shot.lens.far, dist + 15.0)  # beyond the target, its own tank hides the rest
+        sun = shot.sun_dir if shot.sun_elevation > 0 else None
+        wanted |= {it["tag"] for it in cull(spheres, shot.cam_pose, k, shot.lens.near, far, sun)}
+    for tag in sorted(wanted):
+        bl.load(tag)
+    bl.load_terrain()  # the ground: shadows, bounce light, what the gauge glass reflects
+    centres = [site.pose(site.placement(t))[:3, 3] for t in {s.target for s in shots}]
+    poles = [p["tag"] for p in site.placements if p["asset"] == "lighting_pole" and p["asset"] in site.manifests
+             and min(np.linalg.norm(np.array(p["enu"]) - c) for c in centres) < 120.0]
+    bl.add_lamps(sorted(poles))
+
+
+def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
+    """One frame; `lock` = (gain, white balance) of a locked exposure, or None to meter."""
+    binding = pointer_binding(site, shot.target)
+    bl.set_shot(shot, binding)
+    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
+    t0 = time.perf_counter()
+    linear = bl.render()
+    seconds = time.perf_counter() - t0
+    if lock is None:
+        gain, wb = metered_gain(linear, cam), metered_white_balance(linear, cam)
+    else:
+        gain, wb = lock[0], np.asarray(lock[1], float)
+    view_axis = -shot.cam_pose[:3, 2]
+    visible = shot.sun_elevation > 0 and bl.sun_visible(shot.cam_pose[:3, 3], shot.sun_dir)
+    veil = veil_radiance(shot.sun_dir, view_axis, shot.dni, visible, cam)
+    rgb = develop(linear, gain, veil, wb, cam)
+    labels = frame_labels(shot, k, site, gain, veil, binding)
+    labels["pointer_rows_px"] = bl.pointer_rows(shot.target, shot.cam_pose, k)
+    labels["camera"]["white_balance"] = [float(v) for v in wb]
+    labels["render_s"] = seconds
+    labels["frame_s"] = time.perf_counter() - t0  # render + develop (ISP)
+    digest = write_png(folder / f"{name}.png", rgb)
+    labels["image"] = f"{name}.png"
+    labels["sha256"] = digest
+    write_json(folder / f"{name}.json", {k2: v for k2, v in labels.items() if k2 not in ("render_s", "frame_s")})
+    return {"name": name, "image": f"{name}.png", "sha256": digest, "labels": labels, "rgb": rgb}
