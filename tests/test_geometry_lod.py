@@ -134,14 +134,14 @@ def test_levels_side_by_side_are_the_levels_one_after_the_other(monkeypatch, bud
     """Side by side, each level's search learns its ceiling late (or after it ended);
     the levels must still be exactly those of the searches one after the other, here
     on budgets whose coarser searches cannot beat the finer level (the ceiling cuts)."""
-    from pipeline import spare
+    from pipeline import fork_join
 
     v, f = meshes.insulator_mesh(sheds=8, segments=48, target_faces=12000)
     mesh = C.clean_mesh(ir.Mesh(v, f))
     alone = S.simplify_levels(mesh.vertices, mesh.faces, budgets)
     spread = []
-    workers = S.Workers(cores=2, spread=lambda parts: spread.append(len(parts)) or spare.spread(parts))
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "2")  # spare.spread forks only with a core to spare
+    workers = S.Workers(cores=2, spread=lambda parts: spread.append(len(parts)) or fork_join.spread(parts))
+    monkeypatch.setenv(fork_join.SHARE_VARIABLE, "2")  # fork_join.spread forks only with a core to spare
     side_by_side = S.simplify_levels(mesh.vertices, mesh.faces, budgets, workers=workers)
     assert spread == [len(budgets)]  # it did run side by side, a process per level
     counts = [len(r.faces) for r in alone]

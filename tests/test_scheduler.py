@@ -235,7 +235,7 @@ def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypat
     from pipeline.builder.graph import FileHasher, check_graph
     from pipeline.builder.executors import init_worker
     from pipeline.builder.scheduler import Scheduler
-    from pipeline.spare import SHARE_VARIABLE
+    from pipeline.fork_join import SHARE_VARIABLE
 
     monkeypatch.setattr(os, "cpu_count", lambda: 4)
     out = tmp_path / "build"

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from pipeline.builder.graph import Task
 from pipeline.builder.scheduler import Scheduler
-from pipeline.spare import SHARE_VARIABLE
+from pipeline.fork_join import SHARE_VARIABLE
 
 
 def upper(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:

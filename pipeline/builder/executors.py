@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Callable
 
 from ..errors import UserError
-from ..spare import SHARE_VARIABLE
+from ..fork_join import SHARE_VARIABLE
 
 # thread pools of the native libraries a task uses that a variable sizes (libigl's)
 THREAD_VARIABLES = ("IGL_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -36,7 +36,7 @@ class Workers:
     """What a build asks of its workers.
 
     count:   tasks in flight at once (the scheduler never submits more);
-    threads: cores each task may use for native thread pools and spare.beside;
+    threads: cores each task may use for native thread pools and fork_join.beside;
     cpus:    CPUs to hold the workers to, empty for no affinity;
     memory:  bytes of address space each worker may map (RLIMIT_AS), None for no
              limit: a task that needs more fails with MemoryError, which is its own
@@ -78,7 +78,7 @@ def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict
     """One task, wherever it runs. User errors come back as data (with the file and
     the object they name) so the scheduler reports them; running out of memory is
     such a failure too; a bug keeps its trace for the report, not the user's screen.
-    `cores`: the task's share of the cores for spare.beside and spread, which the
+    `cores`: the task's share of the cores for fork_join.beside and spread, which the
     scheduler gives when it submits the task (all of the build's to a task that
     starts with nothing beside it, the scene at the end of a cold build)."""
     before = os.environ.get(SHARE_VARIABLE)
@@ -176,7 +176,7 @@ def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: in
             slots.value += 1
     for name in THREAD_VARIABLES:
         os.environ.setdefault(name, str(threads))
-    os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (spare.beside)
+    os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (fork_join.beside)
     # Kept after bpy's own exit handler (run_task), so it runs first: Blender's exit
     # clean-up costs a quarter of a second per worker, and tearing down the
     # interpreter's modules a tenth without it, and the build waits for both. By then

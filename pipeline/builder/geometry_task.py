@@ -12,7 +12,7 @@ from .layout import ir_path, source_path
 # what build_geometry imports (mostly inside functions): 0.22-0.25 s in a fresh worker,
 # and jsonschema (0.08 s) for asset.toml's check
 WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
-        "pipeline.validate.checks", "pipeline.spare", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
+        "pipeline.validate.checks", "pipeline.fork_join", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
 
 
 def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:
@@ -20,13 +20,13 @@ def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[
     `memo`: where the LOD search keeps its levels between builds (geometry.simplify.Memo);
     `checked`: where the per-mesh checks keep their findings (validate.checks.mesh_findings).
     The LOD step gets the validator's per-visual verdict and this worker's share of the
-    cores (spare) from here: geometry imports neither."""
+    cores (fork_join) from here: geometry imports neither."""
     from functools import partial
 
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain
     from ..geometry.simplify import Workers
-    from ..spare import core_share, spread
+    from ..fork_join import core_share, spread
     from ..validate.checks import visual_verdict
 
     workers = Workers(cores=core_share(), spread=spread)

@@ -138,7 +138,7 @@ class Scheduler:
         return meta
 
     def _worker_setup(self, order: list[Task], state: dict, hasher: FileHasher) -> int:
-        """The cores per worker for native thread pools and spare.beside, from the
+        """The cores per worker for native thread pools and fork_join.beside, from the
         tasks this build will run: split among the tasks that can start side by side.
         An edit that reruns one asset's chain gives its task every core of the build's
         share, a cold build gives each worker its part of it. A task after one that

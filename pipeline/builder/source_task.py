@@ -7,7 +7,7 @@ import time
 from pathlib import Path
 
 from .. import config, ir
-from ..spare import beside
+from ..fork_join import beside
 from .layout import source_path
 
 

@@ -43,9 +43,9 @@ from .viewer_task import viewer_tasks
 
 SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
                "pipeline.ingest.mesh", "pipeline.ingest.units", "pipeline.ingest.gltf_file",
-               "pipeline.ingest.tessellate", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.spare",
+               "pipeline.ingest.tessellate", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.fork_join",
                "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.source_task")
-GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.validate.checks", "pipeline.spare",
+GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.validate.checks", "pipeline.fork_join",
                  "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.geometry_task")
 PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.digest", "pipeline.validate.checks",
                 "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.package_task")

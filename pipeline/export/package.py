@@ -13,7 +13,7 @@ from typing import Callable
 from .. import ir
 from ..digest import sha256_file
 from ..errors import UserError
-from ..spare import spread
+from ..fork_join import spread
 from . import PACKAGE_FORMATS, names, sdf, writer
 
 

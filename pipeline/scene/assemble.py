@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import config
-from ..spare import beside
+from ..fork_join import beside
 from ..export import names
 from . import placements as placing
 from . import scene_gltf, stage_usd, world_sdf

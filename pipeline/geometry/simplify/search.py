@@ -41,7 +41,7 @@ def in_order(parts: list[Callable[[], T]]) -> list[T]:
 class Workers:
     """How the caller lets a search run its independent parts: `cores`, how many
     cores it may keep busy (1: one part after the other); `spread(parts)`, which
-    returns [part() for part in parts] run as the caller sees fit (spare.spread forks
+    returns [part() for part in parts] run as the caller sees fit (fork_join.spread forks
     a process per part). Parts share a `Board` by memory, so `spread` runs them
     forked or in threads, never in spawned processes. The results do not depend on it."""
 

@@ -1,4 +1,4 @@
-"""spare.beside: a task's two parts side by side when its worker has a core to spare,
+"""fork_join.beside: a task's two parts side by side when its worker has a core to spare,
 with the same results, the same files and the same errors as one after the other."""
 
 from __future__ import annotations
@@ -9,25 +9,25 @@ from pathlib import Path
 import pytest
 
 from fixtures_assets import articulated_asset
-from pipeline import spare
+from pipeline import fork_join
 from pipeline.export.package import write_package
 from pipeline.errors import UserError
 
 
 @pytest.fixture
 def two_cores(monkeypatch):
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "2")
+    monkeypatch.setenv(fork_join.SHARE_VARIABLE, "2")
 
 
 def test_child_part_runs_in_another_process(two_cores):
-    here, there = spare.beside(os.getpid, os.getpid)
+    here, there = fork_join.beside(os.getpid, os.getpid)
     assert here == os.getpid()
     assert there != os.getpid()
 
 
 def test_one_core_runs_both_here(monkeypatch):
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
-    assert spare.beside(os.getpid, os.getpid) == (os.getpid(), os.getpid())
+    monkeypatch.setenv(fork_join.SHARE_VARIABLE, "1")
+    assert fork_join.beside(os.getpid, os.getpid) == (os.getpid(), os.getpid())
 
 
 def test_child_error_surfaces_as_from_a_plain_call(two_cores):
@@ -35,7 +35,7 @@ def test_child_error_surfaces_as_from_a_plain_call(two_cores):
         raise UserError("x.blend", "Cube", "bad mesh")
 
     with pytest.raises(UserError, match="x.blend: Cube: bad mesh"):
-        spare.beside(lambda: 1, refuse)
+        fork_join.beside(lambda: 1, refuse)
 
 
 def test_a_child_that_dies_is_run_again_here(two_cores):
@@ -46,7 +46,7 @@ def test_a_child_that_dies_is_run_again_here(two_cores):
             os._exit(3)
         return "ran here"
 
-    assert spare.beside(lambda: 1, dies_in_the_child) == (1, "ran here")
+    assert fork_join.beside(lambda: 1, dies_in_the_child) == (1, "ran here")
 
 
 def test_here_error_waits_for_the_child_and_surfaces(two_cores, tmp_path):
@@ -60,7 +60,7 @@ def test_here_error_waits_for_the_child_and_surfaces(two_cores, tmp_path):
         raise ValueError("here failed")
 
     with pytest.raises(ValueError, match="here failed"):
-        spare.beside(fail, child)
+        fork_join.beside(fail, child)
     assert marker.read_text() == "done"  # no orphan left writing after the call
 
 
@@ -70,9 +70,9 @@ def _files(root: Path) -> dict[str, bytes]:
 
 def test_package_is_the_same_written_side_by_side(monkeypatch, tmp_path):
     asset = articulated_asset()
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "1")
+    monkeypatch.setenv(fork_join.SHARE_VARIABLE, "1")
     serial = write_package(asset, tmp_path / "serial" / "models", alongside=lambda: "checked")
-    monkeypatch.setenv(spare.SHARE_VARIABLE, "2")
+    monkeypatch.setenv(fork_join.SHARE_VARIABLE, "2")
     forked = write_package(asset, tmp_path / "forked" / "models", alongside=lambda: "checked")
     assert serial == forked
     assert serial[2] == "checked"
@@ -81,16 +81,16 @@ def test_package_is_the_same_written_side_by_side(monkeypatch, tmp_path):
 
 
 def test_spread_runs_each_part_after_the_first_in_a_process_of_its_own(two_cores):
-    pids = spare.spread([os.getpid, os.getpid, os.getpid])
+    pids = fork_join.spread([os.getpid, os.getpid, os.getpid])
     assert pids[0] == os.getpid()
     assert len(set(pids)) == 3
 
 
 def test_spread_keeps_the_order_and_surfaces_a_part_error(two_cores):
-    assert spare.spread([lambda: 1, lambda: 2, lambda: 3]) == [1, 2, 3]
+    assert fork_join.spread([lambda: 1, lambda: 2, lambda: 3]) == [1, 2, 3]
 
     def refuse():
         raise UserError("x.blend", "Cube", "bad mesh")
 
     with pytest.raises(UserError, match="x.blend: Cube: bad mesh"):
-        spare.spread([lambda: 1, lambda: 2, refuse])
+        fork_join.spread([lambda: 1, lambda: 2, refuse])

@@ -1,4 +1,5 @@
-"""Independent parts of one task side by side, when its worker has a core to spare.
+"""Fork-join over spare cores: independent parts of one task side by side, when its
+worker has a core to spare.
 
 A cold build keeps every core busy with tasks of its own; an edit that reruns one
 asset's chain leaves all but one idle. The scheduler tells each worker its share of
