@@ -1,0 +1,110 @@
+"""Opening an untrusted .blend with nothing stored in it run.
+
+The file is opened with Python auto-execution off, so text blocks registered to run
+on load are skipped. Blender still evaluates the depsgraph while loading; with
+auto-execution off it only runs a scripted driver whose bytecode passes its
+whitelist (math names only): an expression calling `open` is refused, not run.
+`mute_python_drivers` then mutes every Python-expression driver before the reader
+evaluates anything, so such properties keep their stored values and nothing depends
+on that whitelist; Blender's simple-expression drivers (no Python at all) still
+work. The reader lists the muted drivers in the asset's metadata (`notes`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import sys
+from pathlib import Path
+
+from ...errors import UserError
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Blender's C logger prints 'Read blend: ...' on file descriptor 1 for every open;
+    builds print progress there. Errors still arrive as exceptions."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+
+
+def open_untrusted(path: Path) -> None:
+    """Load `path` as Blender's main file without running anything stored in it.
+
+    Every open replaces the whole main database, so nothing leaks between files."""
+    if not path.is_file():
+        raise UserError(path, None, "file not found")
+    import bpy
+
+    # Both switches: the preference governs later reloads, `use_scripts=False` this
+    # load; with them off Blender neither runs registered text blocks nor evaluates
+    # Python-expression drivers.
+    bpy.context.preferences.filepaths.use_scripts_auto_execute = False
+    try:
+        with _quiet_stdout():
+            bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
+    except RuntimeError as e:
+        reason = str(e).strip().splitlines()[0] if str(e).strip() else "unreadable"
+        reason = reason.removeprefix("Error: ")
+        saved = header_version(path)
+        if saved is not None and saved > tuple(bpy.app.version[:2]):
+            reason += (f" (saved by Blender {saved[0]}.{saved[1]}, newer than the Blender "
+                       f"{bpy.app.version_string} reading it)")
+        raise UserError(path, None, f"not a readable .blend file (truncated or corrupt?): {reason}") from None
+
+
+_HEADER = re.compile(rb"^BLENDER(?:[-_][vV](\d)(\d\d)|\d\d-\d\d[vV](\d\d)(\d\d))")
+
+
+def header_version(path: Path) -> tuple[int, int] | None:
+    """(major, minor) Blender version in an uncompressed .blend's header, e.g.
+    BLENDER-v279 (2.79) or BLENDER17-01v0500 (5.0); None when compressed or not one."""
+    with open(path, "rb") as fh:
+        head = fh.read(17)
+    m = _HEADER.match(head)
+    if m is None:
+        return None
+    major, minor = (m.group(1), m.group(2)) if m.group(1) else (m.group(3), m.group(4))
+    return int(major), int(minor)
+
+
+# ID collections whose blocks can carry drivers (animation_data).
+_ANIMATABLE = (
+    "objects", "meshes", "shape_keys", "materials", "node_groups", "scenes", "curves",
+    "lights", "cameras", "worlds", "textures", "armatures", "lattices", "metaballs",
+)
+
+
+def mute_python_drivers() -> list[str]:
+    """Mute every scripted driver that is not a simple expression; returns them as
+    `<id name>.<data path>[<index>]`, sorted."""
+    import bpy
+
+    owners = []
+    for attr in _ANIMATABLE:
+        for block in getattr(bpy.data, attr, ()):
+            owners.append(block)
+            tree = getattr(block, "node_tree", None)
+            if tree is not None:
+                owners.append(tree)
+    muted = []
+    for block in owners:
+        ad = getattr(block, "animation_data", None)
+        if ad is None:
+            continue
+        for fc in ad.drivers:
+            if fc.driver.type == "SCRIPTED" and not fc.driver.is_simple_expression and not fc.mute:
+                fc.mute = True
+                muted.append(f"{block.name}.{fc.data_path}[{fc.array_index}]")
+    if muted:
+        bpy.context.evaluated_depsgraph_get().update()
+    return sorted(muted)
