@@ -125,14 +125,11 @@ def populate(bl: CyclesScene, site: Site, shots: list[Shot]) -> None:
     bl.add_lamps(sorted(poles))
 
 
-def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
-    """One frame; `lock` = (gain, white balance) of a locked exposure, or None to meter."""
-    binding = pointer_binding(site, shot.target)
-    bl.set_shot(shot, binding)
-    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
-    t0 = time.perf_counter()
-    linear = bl.render()
-    seconds = time.perf_counter() - t0
+def develop_shot(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCamera, lock,
+                 seed: int = 0) -> tuple[np.ndarray, float, np.ndarray, float]:
+    """The phone's picture of one linear render: (RGB uint8, gain, white balance, veil).
+    `lock` = (gain, white balance) of a locked exposure, or None to meter this frame;
+    `seed` draws the frame's sensor noise."""
     if lock is None:
         gain, wb = metered_gain(linear, cam), metered_white_balance(linear, cam)
     else:
@@ -141,6 +138,18 @@ def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: 
     visible = shot.sun_elevation > 0 and bl.sun_visible(shot.cam_pose[:3, 3], shot.sun_dir)
     veil = veil_radiance(shot.sun_dir, view_axis, shot.dni, visible, cam)
     rgb = develop(linear, gain, veil, wb, cam)
+    return rgb, gain, wb, veil
+
+
+def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
+    """One frame; `lock` = (gain, white balance) of a locked exposure, or None to meter."""
+    binding = pointer_binding(site, shot.target)
+    bl.set_shot(shot, binding)
+    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
+    t0 = time.perf_counter()
+    linear = bl.render()
+    seconds = time.perf_counter() - t0
+    rgb, gain, wb, veil = develop_shot(bl, shot, linear, cam, lock)
     labels = frame_labels(shot, k, site, gain, veil, binding)
     labels["pointer_rows_px"] = bl.pointer_rows(shot.target, shot.cam_pose, k)
     labels["camera"]["white_balance"] = [float(v) for v in wb]
