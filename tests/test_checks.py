@@ -13,7 +13,8 @@ import pytest
 
 from fixtures_assets import box_mesh
 from pipeline import ir
-from pipeline.validate.checks import RULES, Finding, check_asset, check_package, finding
+from pipeline.findings import RULES, Finding, finding, mesh_findings
+from pipeline.validate.checks import check_asset, check_package
 
 DATA = Path(__file__).parent / "data"
 
@@ -77,7 +78,6 @@ def test_findings_recalled_from_the_memo_are_the_findings_checked(code, tmp_path
 
 def test_memo_findings_take_the_site_they_are_asked_for(tmp_path):
     from pipeline.builder.memo import ArrayMemo
-    from pipeline.validate.checks import mesh_findings
 
     box = box_mesh()
     inward = ir.Mesh(box.vertices, box.faces[:, ::-1])  # every face turned over: GEOM005

@@ -11,7 +11,7 @@ from fixtures_assets import box_mesh
 from pipeline import ir
 from pipeline.export import collada as collada_writer
 from pipeline.validate import gazebo
-from pipeline.validate.checks import RULES
+from pipeline.findings import RULES
 
 STEEL = ir.Material("steel")
 

@@ -11,7 +11,7 @@ from pipeline.bench.simplifiers import bench_simplifiers
 from pipeline.geometry import clean as C, lod, metrics
 from pipeline.geometry import simplify as S
 from pipeline.geometry.simplify import levels as L, pieces as P, search as SE
-from pipeline.validate.checks import visual_verdict
+from pipeline.findings import visual_verdict
 
 
 def sphere(sub=4, offset=0.0):
@@ -110,7 +110,7 @@ def test_lod_of_touching_cad_parts_adds_no_edge_defect_to_any_part():
     from pipeline import config
     from pipeline.builder.geometry_task import asset_steps
     from pipeline.builder.source_task import read_source
-    from pipeline.validate.checks import edge_defect_counts
+    from pipeline.findings import edge_defect_counts
 
     toml = Path(__file__).parents[1] / "sources/assets/post_insulator/asset.toml"
     cfg = config.load_asset_config(toml)

@@ -23,7 +23,8 @@ from pipeline.cli import main
 from pipeline.errors import UserError
 from pipeline.export import manifest
 from pipeline.validate import external, report
-from pipeline.validate.checks import RULES, check_asset
+from pipeline.findings import RULES
+from pipeline.validate.checks import check_asset
 
 DATA = Path(__file__).parent / "data"
 SCHEMA = json.loads((Path(__file__).parents[1] / "schemas" / "report.schema.json").read_text())

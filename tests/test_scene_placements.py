@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from pipeline import ir
+from pipeline.findings import Finding
 from pipeline.scene import checks
 from pipeline.scene.placements import Placed, choose_lods, screen_error_px, yaw_matrix
 
@@ -89,7 +90,7 @@ def test_overlapping_footprints_are_one_warning_with_their_depth():
     fp = ir.FloorPlan("plan.dxf", "m", tuple(p.placement for p in placed),
                       (ir.Platform("L1", np.array([[-50.0, -50.0], [50.0, -50.0], [50.0, 50.0], [-50.0, 50.0]])),))
     out = checks.check_placements(SimpleNamespace(), fp, placed, manifests, np.zeros(len(placed)))
-    assert out == [checks.finding("PLACE004", "warning", "A|B", "footprints of A and B overlap by 0.50 m")]
+    assert out == [Finding("PLACE004", "warning", "A|B", "footprints of A and B overlap by 0.50 m").as_dict()]
 
 
 def test_lod_choice_follows_the_distance_to_the_nearest_eye():
@@ -182,12 +183,12 @@ def test_overlaps_are_one_warning_per_cluster():
     out = _cluster_site(placed)
     assert [f["code"] for f in out] == ["PLACE004"] * 3
     chain, pile, pair = sorted(out, key=lambda f: f["site"])
-    assert chain == checks.finding("PLACE004", "warning", "A|B|C", "footprints of 3 placements overlap, each by "
-                                   "more than 0.10 m with one or more of the others: A, B, C")
+    assert chain == Finding("PLACE004", "warning", "A|B|C", "footprints of 3 placements overlap, each by "
+                            "more than 0.10 m with one or more of the others: A, B, C").as_dict()
     assert pile["site"] == "PILE-00|PILE-01|PILE-02|and 38 more"
     assert pile["message"] == ("footprints of 41 placements overlap, each by more than 0.10 m with one or more of the "
                                "others; 40 of them at one point: PILE-00, PILE-01, PILE-02, PILE-03, PILE-04 and 36 more")
-    assert pair == checks.finding("PLACE004", "warning", "P|Q", "footprints of P and Q overlap by 0.30 m")
+    assert pair == Finding("PLACE004", "warning", "P|Q", "footprints of P and Q overlap by 0.30 m").as_dict()
 
 
 def test_clusters_match_the_components_of_every_pair():

@@ -12,13 +12,13 @@ from .layout import ir_path, source_path
 # what build_geometry imports (mostly inside functions): 0.22-0.25 s in a fresh worker,
 # and jsonschema (0.08 s) for asset.toml's check
 WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
-        "pipeline.validate.checks", "pipeline.fork_join", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
+        "pipeline.findings", "pipeline.fork_join", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
 
 
 def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[str, object]]:
     """The geometry pipeline of one cleaned asset: named Asset -> Asset steps, in order.
     `memo`: where the LOD search keeps its levels between builds (geometry.simplify.Memo);
-    `checked`: where the per-mesh checks keep their findings (validate.checks.mesh_findings).
+    `checked`: where the per-mesh checks keep their findings (findings.mesh_findings).
     The LOD step gets the validator's per-visual verdict and this worker's share of the
     cores (fork_join) from here: geometry imports neither."""
     from functools import partial
@@ -26,8 +26,8 @@ def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain
     from ..geometry.simplify import Workers
+    from ..findings import visual_verdict
     from ..fork_join import core_share, spread
-    from ..validate.checks import visual_verdict
 
     workers = Workers(cores=core_share(), spread=spread)
     return [

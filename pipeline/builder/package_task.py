@@ -38,7 +38,8 @@ def build_asset(staging: Path, asset_toml: str, build: str, memo: str | None = N
     `checks_namespace`."""
     from ..export import manifest
     from ..export.package import write_package
-    from ..validate.checks import Finding, as_dicts, budget_findings, check_asset
+    from ..findings import Finding, as_dicts
+    from ..validate.checks import budget_findings, check_asset
     from . import irfile
     from .memo import ArrayMemo, FileMemo
 

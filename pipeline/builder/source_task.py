@@ -36,7 +36,8 @@ def build_source(staging: Path, asset_toml: str) -> dict:
     """Task action: one asset's source file read and cleaned, written as an .ir file
     with the findings on the file as authored."""
     from ..geometry.clean import CleanOptions, clean
-    from ..validate.checks import as_dicts, check_asset
+    from ..findings import as_dicts
+    from ..validate.checks import check_asset
     from . import irfile
 
     timings = {}

@@ -5,7 +5,8 @@ PLACE003 outside every platform of its level (warning: on a slope)
 PLACE004 footprints overlap beyond tolerance: one finding per cluster of placements
          that overlap one another (a connected component of the overlap graph)
 PLACE005 base not on the terrain (over 1 cm)
-Each finding is a dict {code, severity, site, message}, sorted for stable reports.
+The findings are findings.Finding records (severities from findings.RULES), handed on
+as dicts sorted for stable reports.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .. import ir
+from ..findings import Finding, finding
 
 OVERLAP_TOLERANCE_M = 0.10
 BASE_TOLERANCE_M = 0.01
@@ -24,10 +26,6 @@ LISTED_TAGS = 5
 # Candidate pairs handed on at a time: a pile of placements has as many pairs as the
 # square of its size, so they are tested in chunks and the ones already joined skipped.
 PAIR_CHUNK = 1 << 16
-
-
-def finding(code: str, severity: str, site: str, message: str) -> dict:
-    return {"code": code, "severity": severity, "site": site, "message": message}
 
 
 def point_in_polygon(p: np.ndarray, poly: np.ndarray) -> bool:
@@ -169,13 +167,15 @@ def overlap_clusters(boxes: Footprints, tolerance: float) -> tuple[np.ndarray, n
 
 
 def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict], terrain_z: np.ndarray) -> list[dict]:
-    out: list[dict] = []
+    """The placement findings as placements.json holds them (Finding.as_dict), sorted
+    by code, then site."""
+    out: list[Finding] = []
     for tag, n in sorted(Counter(p.tag for p in fp.placements).items()):
         if n > 1:
-            out.append(finding("PLACE002", "error", tag, f"TAG used by {n} placements"))
+            out.append(finding("PLACE002", tag, f"TAG used by {n} placements"))
     for p in fp.placements:
         if p.asset_id not in manifests:
-            out.append(finding("PLACE001", "error", p.tag, f"block {p.asset_id!r} is no known asset"))
+            out.append(finding("PLACE001", p.tag, f"block {p.asset_id!r} is no known asset"))
 
     platforms: dict[str, list[np.ndarray]] = {}
     for pf in fp.platforms:
@@ -190,7 +190,7 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
     for pl, inside in zip(placed, on_platform):
         p = pl.placement
         if not inside:
-            out.append(finding("PLACE003", "warning", p.tag,
+            out.append(finding("PLACE003", p.tag,
                                f"at plan ({p.x:.3f}, {p.y:.3f}) outside every PLATFORM_{p.level} outline"
                                f" (standing {p.z:.3f} m above {p.level} on the slope or ground)"))
 
@@ -200,9 +200,9 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
         # level. Off the platform (on a slope) INSERT z lifts the foot onto the terrain.
         base = pl.pose[2, 3] - p.z if inside else pl.pose[2, 3]
         if not np.isfinite(tz):
-            out.append(finding("PLACE005", "error", p.tag, "no terrain under the placement"))
+            out.append(finding("PLACE005", p.tag, "no terrain under the placement"))
         elif abs(base - tz) > BASE_TOLERANCE_M:
-            out.append(finding("PLACE005", "error", p.tag,
+            out.append(finding("PLACE005", p.tag,
                                f"base at z={base:.4f} m, terrain at {tz:.4f} m ({abs(base - tz) * 1000:.1f} mm apart)"))
 
     kept = [pl for pl in placed if pl.placement.asset_id in manifests]
@@ -211,10 +211,11 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
         poses = np.array([pl.pose for pl in kept])
         label, depth = overlap_clusters(footprints(poses, bounds[:, 0], bounds[:, 1]), OVERLAP_TOLERANCE_M)
         out += _overlap_findings([pl.placement.tag for pl in kept], poses[:, :3, 3], label, depth)
-    return sorted(out, key=lambda f: (f["code"], f["site"]))
+    return [f.as_dict() for f in sorted(out, key=lambda f: (f.code, f.site))]
 
 
-def _overlap_findings(tags: list[str], positions: np.ndarray, label: np.ndarray, depth: np.ndarray) -> list[dict]:
+def _overlap_findings(tags: list[str], positions: np.ndarray, label: np.ndarray,
+                      depth: np.ndarray) -> list[Finding]:
     """One PLACE004 per cluster of two or more (overlap_clusters' labels): a pair with
     its depth, a larger cluster with its size, how many of it share one point (blocks
     inserted at one spot), and its first tags."""
@@ -225,7 +226,7 @@ def _overlap_findings(tags: list[str], positions: np.ndarray, label: np.ndarray,
         names = sorted(tags[m] for m in members)
         if len(names) == 2:
             a, b = names
-            out.append(finding("PLACE004", "warning", f"{a}|{b}",
+            out.append(finding("PLACE004", f"{a}|{b}",
                                f"footprints of {a} and {b} overlap by {depth[members[0]]:.2f} m"))
             continue
         n, shown = len(names), names[:LISTED_TAGS]
@@ -233,7 +234,7 @@ def _overlap_findings(tags: list[str], positions: np.ndarray, label: np.ndarray,
         piled = f"; {spots.max()} of them at one point" if spots.max() > 1 else ""
         more = f" and {n - len(shown)} more" if n > len(shown) else ""
         site = "|".join(names[:3]) + (f"|and {n - 3} more" if n > 3 else "")
-        out.append(finding("PLACE004", "warning", site,
+        out.append(finding("PLACE004", site,
                            f"footprints of {n} placements overlap, each by more than {OVERLAP_TOLERANCE_M:.2f} m "
                            f"with one or more of the others{piled}: {', '.join(shown)}{more}"))
     return out

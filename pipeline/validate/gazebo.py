@@ -12,7 +12,7 @@ compares what Gazebo saw with what the files hold, read here with lxml as float6
   within the LOD's measured error;
 - the world: parse time and peak memory, sdformat's errors.
 
-Findings use the GZ rules of validate.checks.RULES.
+Findings use the GZ rules of findings.RULES.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from .checks import Finding, finding
+from ..findings import Finding, finding
 
 PROBE = Path(__file__).resolve().parents[2] / "tools" / "gzprobe" / "gzprobe"
 PROBE_HINT = "bash .ci/install-tools (builds tools/gzprobe against Debian's libsdformat-dev, libignition-*-dev)"

@@ -25,8 +25,9 @@ from pathlib import Path
 from lxml import etree
 
 from ..errors import UserError
+from ..findings import RULES, Finding, sort_findings
 from . import external, gazebo
-from .checks import RULES, Finding, check_package, sort_findings
+from .checks import check_package
 
 REPORT_FORMAT = 1
 _LOD_VARIANT = re.compile(r"^(?P<base>.+)__lod\d+$")
