@@ -1,25 +1,9 @@
-"""One writer module per output format; `WRITERS` maps a format to its module.
+"""One writer module per output format, each exposing `write(asset: ir.Asset,
+folder: Path, ...) -> list[str]` and nothing else: collada, sdf, usd, gltf,
+thumbnail, textures. `package.WRITERS` maps a format to its writer and
+`package.write_package` writes them all into one model folder; `names` and
+`manifest` are what the readers of a package share with the writers.
 
-Each module exposes `write(asset: ir.Asset, folder: Path, ...) -> list[str]` and
-nothing else; `package` writes them all into one model folder. Modules are imported when first asked for, so importing this package
-costs nothing (pxr, pycollada and pillow load only when their writer runs).
+This package imports nothing: the checks and the scene read `names` without loading
+a writer's libraries (pycollada, pxr, pillow).
 """
-
-from __future__ import annotations
-
-import importlib
-
-WRITERS = {
-    "collada": "collada",
-    "sdf": "sdf",
-    "usd": "usd",
-    "gltf": "gltf",
-    "thumbnail": "thumbnail",
-    "textures": "textures",
-}
-PACKAGE_FORMATS = ("textures", "collada", "sdf", "usd", "gltf", "thumbnail")
-
-
-def writer(fmt: str):
-    """The `write` function of format `fmt`."""
-    return importlib.import_module(f".{WRITERS[fmt]}", __name__).write

@@ -7,6 +7,7 @@ from what this returns.
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 from typing import Callable
 
@@ -14,25 +15,45 @@ from .. import ir
 from ..digest import sha256_file
 from ..errors import UserError
 from ..fork_join import spread
-from . import PACKAGE_FORMATS, names, sdf, writer
+from . import collada, gltf, names, sdf, textures, thumbnail, usd
+
+# format -> write(asset, folder, ...) -> the package-relative paths written
+WRITERS = {
+    "textures": textures.write,
+    "collada": collada.write,
+    "sdf": sdf.write,
+    "usd": usd.write,
+    "gltf": gltf.write,
+    "thumbnail": thumbnail.write,
+}
+# the formats written beside the rest when the worker has a core to spare: the
+# COLLADA meshes (the largest share of a cold build), the glTF with the thumbnail
+BESIDE = (("gltf", "thumbnail"), ("collada",))
 
 
 def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object] | None = None,
                   memo=None) -> tuple[dict[str, str], list[str], object, dict]:
     """Every format of one asset into models/<id>/, LOD variants beside it, and
-    `alongside()` (if given) with them. When the worker has a core to spare, in three
-    parts side by side: the COLLADA meshes (the largest share in a cold build), the
-    glTF with the thumbnail, and the rest here. `memo`: the COLLADA documents of
-    earlier builds (collada.write). Returns (package-relative path -> sha256, LOD
-    variant model names, what alongside returned, how many COLLADA documents were
-    linked from the memo and how many made)."""
+    `alongside()` (if given) with them; the formats of BESIDE each in a part of their
+    own (fork_join.spread). `memo`: the COLLADA documents of earlier builds
+    (collada.write). Returns (package-relative path -> sha256, LOD variant model
+    names, what alongside returned, how many COLLADA documents were linked from the
+    memo and how many made)."""
     folder = inside(models, asset.id)
     folder.mkdir(parents=True, exist_ok=True)
+    options = {"collada": {"memo": memo}}
+
+    def write(formats: tuple[str, ...]) -> dict:
+        """The formats' files; what the memo did meanwhile (a part forked off counts
+        in its own process)."""
+        before = _memo_counts(memo)
+        for fmt in formats:
+            WRITERS[fmt](asset, folder, **options.get(fmt, {}))
+        after = _memo_counts(memo)
+        return {k: after[k] - before[k] for k in after}
 
     def the_rest():
-        for fmt in PACKAGE_FORMATS:
-            if fmt not in ("collada", "gltf", "thumbnail"):
-                writer(fmt)(asset, folder)
+        documents = write(tuple(fmt for fmt in WRITERS if not any(fmt in part for part in BESIDE)))
         lod_models = []
         for level in range(1, asset.lod_count):
             name = names.lod_model_name(asset.id, level)
@@ -40,18 +61,18 @@ def write_package(asset: ir.Asset, models: Path, alongside: Callable[[], object]
             variant.mkdir(parents=True, exist_ok=True)
             sdf.write(asset, variant, lod=level, model_name=name)
             lod_models.append(name)
-        return lod_models, alongside() if alongside is not None else None
+        return documents, lod_models, alongside() if alongside is not None else None
 
-    def gltf_and_thumbnail():
-        return [writer(fmt)(asset, folder) for fmt in ("gltf", "thumbnail")]
-
-    def meshes():
-        writer("collada")(asset, folder, memo)
-        return {"linked": memo.hits, "made": memo.puts} if memo is not None else {}
-
-    (lod_models, extra), _, documents = spread([the_rest, gltf_and_thumbnail, meshes])
+    (documents, lod_models, extra), *beside = spread([the_rest, *(partial(write, part) for part in BESIDE)])
+    for counts in beside:
+        documents = {k: documents[k] + counts[k] for k in documents}
     outputs = {str(p.relative_to(folder)): sha256_file(p) for p in sorted(folder.rglob("*")) if p.is_file()}
     return outputs, lod_models, extra, documents
+
+
+def _memo_counts(memo) -> dict:
+    """The COLLADA memo's documents linked and made so far ({} without a memo)."""
+    return {"linked": memo.hits, "made": memo.puts} if memo is not None else {}
 
 
 def inside(root: Path, name: str) -> Path:

@@ -14,13 +14,13 @@ tell apart.
 from __future__ import annotations
 
 import io
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .. import ir
+from ..files import atomic_write
 
 FILE = "thumbnail.png"
 # Above this many LOD0 triangles the coarsest LOD is drawn instead (if there is one).
@@ -42,14 +42,8 @@ DEPTH_LEVELS = 1 << 30
 
 def write(asset: ir.Asset, folder: Path, size: int = 256) -> list[str]:
     """Render `asset` to folder/thumbnail.png (size x size RGB); returns the names
-    written, relative to `folder`. Written to a temporary name, then renamed."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    image = render(asset, size)
-    data = _png_bytes(image)
-    tmp = folder / f".{FILE}.tmp"
-    tmp.write_bytes(data)
-    os.replace(tmp, folder / FILE)
+    written, relative to `folder`."""
+    atomic_write(Path(folder) / FILE, _png_bytes(render(asset, size)))
     return [FILE]
 
 

@@ -24,7 +24,6 @@ exact IR values also go into each joint's customData.
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -32,6 +31,7 @@ import numpy as np
 
 from pipeline import ir
 from pipeline.errors import UserError
+from pipeline.files import atomic_path
 from pipeline.export import names
 from pipeline.export.textures import texture_file
 from pipeline.geometry.metrics import stored_normals
@@ -46,10 +46,7 @@ _SKELETON = "skel"
 
 def write(asset: ir.Asset, folder: Path) -> list[str]:
     """Write `<id>.usdc` into `folder`; return the package-relative paths written.
-
-    The file is written under a temporary name and renamed into place, so a failed
-    write never leaves a half-written stage.
-    """
+    A failed write leaves no half-written stage (files.atomic_path)."""
     pxr = _import_pxr()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -57,11 +54,9 @@ def write(asset: ir.Asset, folder: Path) -> list[str]:
     stage = pxr.Usd.Stage.CreateInMemory()
     _author(pxr, stage, asset)
     rel = names.usd_file(asset.id)
-    # The crate writer picks its format from the extension: keep .usdc on the temp name.
-    tmp = folder / f".{rel}.tmp.usdc"
-    if not stage.GetRootLayer().Export(str(tmp)):
-        raise UserError(str(folder / rel), asset.id, "USD export failed")
-    os.replace(tmp, folder / rel)
+    with atomic_path(folder / rel) as tmp:  # its temporary name keeps .usdc: the crate writer's format
+        if not stage.GetRootLayer().Export(str(tmp)):
+            raise UserError(str(folder / rel), asset.id, "USD export failed")
     return [rel]
 
 
