@@ -35,7 +35,7 @@ def _triangles(cfg: config.AssetConfig, build: Path) -> int | None:
         data = json.loads(manifest.read_text())
         if data.get("source", {}).get("sha256") == sha256_file(cfg.source):
             return data["lods"][0]["triangles"]
-    from .builder.source_task import read_source
+    from .ingest.readers import read_source
 
     return read_source(cfg).triangle_count(0)
 

@@ -123,7 +123,7 @@ def test_quick_bench_on_mini_sources(tmp_path):
 def test_resave_source_changes_bytes_not_content(tmp_path):
     """The bench's 'saved again' edit: new bytes the reader reads as the same mesh."""
     from pipeline.bench.builds import resave_source
-    from pipeline.builder.source_task import read_source
+    from pipeline.ingest.readers import read_source
     from pipeline import config
 
     src = mini_sources.make(tmp_path / "src")

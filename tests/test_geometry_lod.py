@@ -109,7 +109,7 @@ def test_lod_of_touching_cad_parts_adds_no_edge_defect_to_any_part():
 
     from pipeline import config
     from pipeline.builder.geometry_task import asset_steps
-    from pipeline.builder.source_task import read_source
+    from pipeline.ingest.readers import read_source
     from pipeline.findings import edge_defect_counts
 
     toml = Path(__file__).parents[1] / "sources/assets/post_insulator/asset.toml"

@@ -121,7 +121,7 @@ def asset_tree(root: Path, asset_id: str, files: list[Path], toml: str):
 
 
 def read(cfg):
-    from pipeline.builder.source_task import read_source
+    from pipeline.ingest.readers import read_source
 
     return read_source(cfg)
 

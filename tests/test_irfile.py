@@ -14,7 +14,7 @@ from fixtures_assets import articulated_asset, box_mesh
 from pipeline import config, ir
 from pipeline.builder import irfile
 from pipeline.builder.geometry_task import asset_steps
-from pipeline.builder.source_task import read_source
+from pipeline.ingest.readers import read_source
 from pipeline.errors import UserError
 
 ROOT = Path(__file__).resolve().parent.parent

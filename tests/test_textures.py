@@ -157,7 +157,7 @@ corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus"
 def _read_tree(tmp_path, asset_id: str, copy, toml: str):
     import shutil
 
-    from pipeline.builder.source_task import read_source
+    from pipeline.ingest.readers import read_source
     from pipeline.config import load_asset_config
 
     folder = tmp_path / "sources" / "assets" / asset_id

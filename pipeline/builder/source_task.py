@@ -6,22 +6,9 @@ import dataclasses
 import time
 from pathlib import Path
 
-from .. import config, ir
+from .. import config
 from ..fork_join import beside
 from .layout import source_path
-
-
-def read_source(cfg: config.AssetConfig) -> ir.Asset:
-    """The reader for the source's kind (DESIGN.md s.2), returning ir.Asset."""
-    suffix = cfg.source.suffix.lower()
-    if suffix == ".blend":
-        from ..ingest.blend import read_blend
-        return read_blend(cfg)
-    if suffix in (".step", ".stp"):
-        from ..ingest.cad import read_cad
-        return read_cad(cfg)
-    from ..ingest.mesh import read_mesh
-    return read_mesh(cfg)
 
 
 def _source_config(cfg: config.AssetConfig) -> config.AssetConfig:
@@ -35,8 +22,9 @@ def _source_config(cfg: config.AssetConfig) -> config.AssetConfig:
 def build_source(staging: Path, asset_toml: str) -> dict:
     """Task action: one asset's source file read and cleaned, written as an .ir file
     with the findings on the file as authored."""
-    from ..geometry.clean import CleanOptions, clean
     from ..findings import as_dicts
+    from ..geometry.clean import CleanOptions, clean
+    from ..ingest.readers import read_source
     from ..validate.checks import check_asset
     from . import irfile
 
