@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 
 from .. import ir
 from ..errors import UserError
+from .edges import directed_edges, edge_keys, edge_vertices
 
 
 @dataclass(frozen=True)
@@ -145,10 +146,11 @@ def duplicate_faces(faces: np.ndarray) -> np.ndarray:
 
 
 def edge_face_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Undirected edges (e, 2) int64 (sorted pairs) and how many faces use each (e,)."""
-    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1).astype(np.int64)
-    first, _, counts = unique_rows(edges)
-    return edges[first], counts
+    """Undirected edges (e, 2) int64 (sorted pairs, ascending) and how many faces use
+    each (e,)."""
+    n = int(np.max(faces, initial=-1)) + 1
+    keys, counts = np.unique(edge_keys(faces, n), return_counts=True)
+    return edge_vertices(keys, n), counts
 
 
 def non_manifold_edge_count(faces: np.ndarray) -> int:
@@ -162,9 +164,7 @@ def non_manifold_edge_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """The edges used by more than two faces, each as one int64 key (lower vertex *
     n_vertices + higher), ascending: every undirected edge keyed and counted in one
     1-D sort."""
-    corners = np.asarray(faces, dtype=np.int64)
-    heads, tails = corners.ravel(), corners[:, [1, 2, 0]].ravel()
-    key = np.sort(np.minimum(heads, tails) * n_vertices + np.maximum(heads, tails))
+    key = np.sort(edge_keys(faces, n_vertices))
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else np.zeros(0, dtype=np.int64)
     counts = np.diff(np.r_[starts, len(key)])
     return key[starts[counts > 2]]
@@ -174,12 +174,10 @@ def _face_graph(faces: np.ndarray):
     """Adjacency of faces across manifold edges (exactly 2 faces), and whether each
     adjacent pair is inconsistently wound (traverses the shared edge the same way)."""
     m = len(faces)
-    heads = faces.ravel().astype(np.int64)
-    tails = faces[:, [1, 2, 0]].ravel().astype(np.int64)
-    lo, hi = np.minimum(heads, tails), np.maximum(heads, tails)
-    forward = heads < tails
+    directed = directed_edges(faces)
+    forward = directed[:, 0] < directed[:, 1]
     face_of = np.repeat(np.arange(m), 3)
-    key = lo * (int(hi.max(initial=0)) + 1) + hi
+    key = edge_keys(faces, int(directed.max(initial=0)) + 1)
     order = np.argsort(key, kind="stable")
     key_sorted = key[order]
     starts = np.flatnonzero(np.r_[True, key_sorted[1:] != key_sorted[:-1]])
@@ -252,9 +250,8 @@ def orient_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def _closed_components(faces: np.ndarray, labels: np.ndarray, n_comp: int) -> np.ndarray:
     """(n_comp,) bool: every edge of the component is used by exactly two faces."""
-    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1).astype(np.int64)
     comp = np.repeat(labels, 3)
-    _, inverse, counts = unique_rows(edges)
+    _, inverse, counts = np.unique(edge_keys(faces, int(np.max(faces)) + 1), return_inverse=True, return_counts=True)
     bad_edge = counts[inverse] != 2
     open_comp = np.bincount(comp, weights=bad_edge.astype(np.float64), minlength=n_comp) > 0
     return ~open_comp

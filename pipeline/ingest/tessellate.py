@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry.edges import edge_keys
+
 ANG_TOL_RAD = 0.5
 REL_TOL = 0.05
 # a face whose normals' spread off their best plane is under this share of the spread
@@ -57,9 +59,8 @@ class Face:
 
 def _edge_pairs(tris: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """(a, b): triangles sharing an edge, one pair per interior edge."""
-    edges = np.sort(np.stack([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]], axis=1).reshape(-1, 2), axis=1)
     owner = np.repeat(np.arange(len(tris)), 3)
-    key = edges[:, 0] * (n_vertices + 1) + edges[:, 1]
+    key = edge_keys(tris, n_vertices)
     order = np.argsort(key, kind="stable")
     same = np.nonzero(key[order][1:] == key[order][:-1])[0]
     return owner[order[same]], owner[order[same + 1]]

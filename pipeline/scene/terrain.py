@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import ir
 from ..config import Site
+from ..geometry.edges import edge_keys, edge_vertices
 
 MAX_EDGE_M = 20.0  # flat tops are subdivided so the ellipsoid's curvature stays < 1 mm
 
@@ -62,12 +63,11 @@ def subdivide(points: np.ndarray, tris: np.ndarray, max_edge: float) -> tuple[np
         e = points[tris[:, [1, 2, 0]]] - points[tris]
         if len(tris) == 0 or np.linalg.norm(e, axis=2).max() <= max_edge:
             return points, tris
-        edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), axis=1)
-        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
-        mids = points[unique].mean(axis=1)
+        keys, inverse = np.unique(edge_keys(tris, len(points)), return_inverse=True)
+        mids = points[edge_vertices(keys, len(points))].mean(axis=1)
         base = len(points)
         points = np.concatenate([points, mids])
-        m = inverse.reshape(3, -1).T + base  # midpoints of edges 01, 12, 20
+        m = inverse.reshape(-1, 3) + base  # midpoints of edges 01, 12, 20
         a, b, c = tris.T
         m01, m12, m20 = m.T
         tris = np.concatenate([

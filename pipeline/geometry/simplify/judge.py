@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import clean as _clean
+from ..edges import edge_vertices
 from ..metrics import SurfaceDistance, face_normals, query_points_on, vertex_normals
 
 MEASURE_SAMPLES = 50_000
@@ -173,7 +174,7 @@ class Judge:
         self.part = np.zeros(len(vertices), np.int64) if parts is None else np.unique(parts, return_inverse=True)[1]
         self.non_manifold_keys = _clean.non_manifold_edge_keys(topo, len(vertices))
         self.non_manifold = len(self.non_manifold_keys)
-        self.part_non_manifold = self._per_part(self.part[self.non_manifold_keys // len(vertices)])
+        self.part_non_manifold = self._per_part(self.part[edge_vertices(self.non_manifold_keys, len(vertices))[:, 0]])
         # normals on the welded surface, so a UV seam does not split a corner's normal
         self.normals = vertex_normals(vertices, topo)[self.topology]
         self.fans = vertex_fans(vertices, faces)
@@ -273,7 +274,8 @@ class Judge:
             misses += [queries[d_there > threshold], own[d_back > threshold]]
             how_far += [d_there[d_there > threshold], d_back[d_back > threshold]]
             if added > 0:
-                misses.append((at[new_edges // len(at)] + at[new_edges % len(at)]) / 2.0)
+                ends = edge_vertices(new_edges, len(at))
+                misses.append((at[ends[:, 0]] + at[ends[:, 1]]) / 2.0)
                 how_far.append(np.full(len(new_edges), np.inf))
         result = Simplified(v, f, kept, max(there, back), flips, added)
         return Measurement(result, np.concatenate(misses) if misses else np.zeros((0, 3)),
@@ -334,7 +336,7 @@ class Judge:
         # added edges are misses: locking around the original's own (a lattice of
         # welded members has hundreds) changes nothing, and would use up the rounds
         keys = _clean.non_manifold_edge_keys(topo, len(at))
-        edge_part = self.part[keys // len(at)]
+        edge_part = self.part[edge_vertices(keys, len(at))[:, 0]]
         grown = self._per_part(edge_part) - self.part_non_manifold
         added = int(np.maximum(grown, 0).sum())
         return added, keys[~lookup(self.non_manifold_keys, keys)[0] & (grown[edge_part] > 0)], at

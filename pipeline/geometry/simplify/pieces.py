@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from .. import clean as _clean
+from ..edges import edge_keys, edge_vertices
 from .judge import SAMPLES_PER_FACE
 from .memo import Level
 
@@ -145,7 +146,7 @@ def part_non_manifold(part: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     welded vertices whose parts are `part: (n,)`, as the judge counts them."""
     n = len(part)
     keys = _clean.non_manifold_edge_keys(faces, n)
-    return np.bincount(part[keys // n], minlength=int(part.max(initial=0)) + 1), keys
+    return np.bincount(part[edge_vertices(keys, n)[:, 0]], minlength=int(part.max(initial=0)) + 1), keys
 
 
 def added_non_manifold(part: np.ndarray, faces: np.ndarray, allowed: np.ndarray) -> np.ndarray:
@@ -156,7 +157,6 @@ def added_non_manifold(part: np.ndarray, faces: np.ndarray, allowed: np.ndarray)
     if not (grown > 0).any():
         return np.zeros(0, dtype=np.int64)
     n = len(part)
-    keys = keys[grown[part[keys // n]] > 0]
-    face_edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    on_bad = np.isin(face_edges[:, 0] * n + face_edges[:, 1], keys)
-    return np.unique(np.nonzero(on_bad)[0] % len(faces))
+    keys = keys[grown[part[edge_vertices(keys, n)[:, 0]]] > 0]
+    on_bad = np.isin(edge_keys(faces, n), keys)
+    return np.unique(np.nonzero(on_bad)[0] // 3)
