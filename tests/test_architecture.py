@@ -1,0 +1,130 @@
+"""The house's shape, read from pipeline's own imports (ast, every import statement,
+inside functions too): no import circle between its folders and top-level modules,
+geometry standing on nothing but `ir` and the modules below it, no module over 600
+lines."""
+
+from __future__ import annotations
+
+import ast
+from functools import lru_cache
+from pathlib import Path
+
+PIPELINE = Path(__file__).resolve().parents[1] / "pipeline"
+MAX_LINES = 600
+# What geometry may import from pipeline besides itself: ir and the two modules that
+# stand on nothing in pipeline (ir itself imports digest; errors holds UserError).
+# Checks, parallelism and memos are handed to geometry's steps, never imported.
+BELOW_GEOMETRY = {"ir", "errors", "digest"}
+
+
+def _modules() -> list[Path]:
+    return sorted(p for p in PIPELINE.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def _dotted(path: Path) -> str:
+    parts = list(path.relative_to(PIPELINE.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported(path: Path) -> set[str]:
+    """The dotted names a module imports from pipeline (a `from x import y` gives both
+    x and x.y: y may be a module)."""
+    package = _dotted(path) if path.name == "__init__.py" else _dotted(path).rpartition(".")[0]
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(up + ([node.module] if node.module else []))
+            out |= {base} | {f"{base}.{a.name}" for a in node.names}
+    return {name for name in out if name == "pipeline" or name.startswith("pipeline.")}
+
+
+def unit(name: str) -> str | None:
+    """The folder or top-level module of pipeline a dotted name lies in (None: the
+    package itself, or a name that is no module, such as pipeline.__version__)."""
+    parts = name.split(".")
+    if len(parts) < 2:
+        return None
+    first = parts[1]
+    return first if (PIPELINE / first).is_dir() or (PIPELINE / f"{first}.py").is_file() else None
+
+
+@lru_cache(maxsize=1)
+def unit_graph() -> dict[str, dict[str, list[str]]]:
+    """{unit: {unit it imports: [the importing module -> imported name, ...]}} (read
+    once: do not change it)."""
+    graph: dict[str, dict[str, list[str]]] = {}
+    for path in _modules():
+        source = unit(_dotted(path))
+        if source is None:
+            continue
+        graph.setdefault(source, {})
+        for name in sorted(imported(path)):
+            target = unit(name)
+            if target is not None and target != source:
+                graph[source].setdefault(target, []).append(f"{_dotted(path)} -> {name}")
+    return graph
+
+
+def cycles(graph: dict[str, dict[str, list[str]]]) -> list[list[str]]:
+    """The strongly connected components of more than one unit (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph.get(v, {}):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_graph_reads_relative_and_absolute_imports():
+    graph = unit_graph()
+    assert "geometry" in graph["builder"] and "ir" in graph["geometry"]
+    assert cycles({"a": {"b": []}, "b": {"c": []}, "c": {"a": []}, "d": {"a": []}}) == [["a", "b", "c"]]
+    assert cycles({"a": {"b": []}, "b": {}}) == []
+
+
+def test_no_import_circle_between_pipelines_folders():
+    graph = unit_graph()
+    found = cycles(graph)
+    why = [f"{a} -> {b}: {graph[a][b][0]}" for c in found for a in c for b in c if b in graph.get(a, {})]
+    assert not found, f"import circles {found}: " + "; ".join(why)
+
+
+def test_geometry_stands_only_on_ir_and_below():
+    graph = unit_graph()
+    extra = {u: edges for u, edges in graph["geometry"].items() if u not in BELOW_GEOMETRY}
+    assert not extra, f"geometry imports {sorted(extra)}: {[e for edges in extra.values() for e in edges]}"
+    for below in sorted(BELOW_GEOMETRY):
+        assert set(graph.get(below, {})) <= BELOW_GEOMETRY, (below, graph[below])
+
+
+def test_no_module_over_600_lines():
+    long = {str(p.relative_to(PIPELINE.parent)): n for p in _modules()
+            if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    assert not long, f"over {MAX_LINES} lines: {long}"
