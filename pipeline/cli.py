@@ -70,10 +70,15 @@ def info(sources: Path):
 @click.option("--explain", is_flag=True, help="say for each task why it ran or was skipped")
 @click.option("--json", "as_json", is_flag=True, help="print the explanation as JSON on stdout")
 @click.option("--executor", type=click.Choice(sorted(EXECUTORS)), default="local", show_default=True,
-              help="where tasks run: worker processes, or this one (for a debugger or profiler)")
+              help="where tasks run: worker processes, this one (for a debugger or profiler), "
+                   "or dask.distributed (worker processes on this machine, or --scheduler's cluster)")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="with --executor dask: the dask scheduler to run on (e.g. tcp://host:8786), whose "
+                   "workers see the sources and OUT at the same paths as here (default: a local cluster)")
 @user_errors
 def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cache: Path | None,
-          cache_limit: str, memory_limit: str, explain: bool, as_json: bool, executor: str):
+          cache_limit: str, memory_limit: str, explain: bool, as_json: bool, executor: str,
+          scheduler: str | None):
     """Build the model packages and the scene."""
     from .builder.cache import parse_size
     from .builder.run import build as run_build, failure_lines
@@ -88,8 +93,11 @@ def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cac
     except ValueError:
         raise click.BadParameter(f"{memory_limit!r} is not a size (like 8G), auto or none",
                                  param_hint="--memory-limit")
+    if scheduler is not None and executor != "dask":
+        raise click.BadParameter("a scheduler is for --executor dask", param_hint="--scheduler")
+    factory = functools.partial(EXECUTORS[executor], scheduler=scheduler) if scheduler else EXECUTORS[executor]
     report = run_build(sources, out, jobs=jobs, only=list(only), cache=cache, quiet=as_json,
-                       executor=EXECUTORS[executor], cache_limit=limit, memory_limit=memory)
+                       executor=factory, cache_limit=limit, memory_limit=memory)
     # how long each task that ran took in its worker (the build files carry no timings)
     tasks = [{**e, "seconds": round(report.timings[e["task"]], 4)} if e["task"] in report.timings else e
              for e in report.explanations]

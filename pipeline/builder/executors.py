@@ -26,6 +26,7 @@ from typing import Callable
 
 from ..errors import UserError
 from ..fork_join import SHARE_VARIABLE
+from .dask_executor import dask_pool
 
 # thread pools of the native libraries a task uses that a variable sizes (libigl's)
 THREAD_VARIABLES = ("IGL_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -229,4 +230,4 @@ def in_process(workers: Workers) -> Executor:
     return InProcess()
 
 
-EXECUTORS: dict[str, ExecutorFactory] = {"local": local_pool, "in-process": in_process}
+EXECUTORS: dict[str, ExecutorFactory] = {"local": local_pool, "in-process": in_process, "dask": dask_pool}

@@ -1,0 +1,349 @@
+"""Tasks on dask.distributed, behind a `concurrent.futures.Executor`: the build's
+(`twin build --executor dask`, the factory `dask_pool`) and any other set of
+independent calls, dataset frames for one (the context manager `dask_executor`).
+
+With no scheduler address, a LocalCluster on this machine: one worker process per
+task in flight, one thread each (a task is a process's work, as in the local pool),
+no dashboard, its logs silenced. With an address, the cluster that scheduler runs:
+its workers must import this package and see the build folder and the sources at
+the same paths as this process (a shared filesystem), since tasks read and write
+those paths themselves.
+
+Workers are recycled between tasks, by dask's own restart of a worker process under
+its nanny (`Worker.close_gracefully(restart=True)`): after `tasks_per_worker` tasks,
+or once a task leaves the worker holding more than RECYCLE_SHARE of its memory (what
+no later task frees: Blender's and the allocators' caches, fragmented heaps). The
+worker stops taking tasks before its last one returns, so no task is cut short by a
+recycle; one queued on it goes to another worker. Beyond that the nanny terminates a
+worker whose memory passes dask's `terminate` threshold mid-task, and dask reruns a
+task whose worker died on another one up to `allowed-failures` times (none on a
+LocalCluster: with one task per process, a death is the task's own).
+
+dask is imported when an executor starts, never at import time of the pipeline.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+import shutil
+import time
+import uuid
+from concurrent.futures import CancelledError, Executor, Future
+from contextlib import contextmanager, nullcontext
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Iterator
+
+from ..errors import UserError
+
+if TYPE_CHECKING:  # executors names this module's factory in its table: its names are imported where used
+    from .executors import Workers
+
+INSTALL_HINT = "dask.distributed is not installed: .venv/bin/pip install -e . (it is a dependency)"
+
+# a worker left holding more than this share of its memory after a task is restarted
+RECYCLE_SHARE = 0.5
+
+# how long a recycled worker waits for the client to take its last results
+HANDOVER_SECONDS = 60.0
+
+# a LocalCluster's settings: a worker's memory beyond its limit is a restart, never a
+# pause (tasks hand back small dicts, there is nothing to spill, and a paused worker
+# whose heap stays large would hold the build forever)
+LOCAL_CONFIG = {
+    "distributed.worker.memory.target": False,
+    "distributed.worker.memory.spill": False,
+    "distributed.worker.memory.pause": False,
+    "distributed.scheduler.allowed-failures": 0,
+}
+
+
+# --- in a worker -----------------------------------------------------------------
+
+_FINISHED = 0  # tasks this worker process has run
+
+
+def call(fn, args: tuple, kwargs: dict, tasks_per_worker: int | None, memory: int | None):
+    """`fn(*args, **kwargs)` in a worker; a worker worn out by it stops taking tasks
+    before it returns, and restarts once its results are taken."""
+    global _FINISHED
+    try:
+        return fn(*args, **kwargs)
+    finally:
+        _FINISHED += 1
+        if worn_out(_FINISHED, tasks_per_worker, memory):
+            _retire()
+
+
+def worn_out(finished: int, tasks_per_worker: int | None, memory: int | None) -> bool:
+    """Whether a worker that has run `finished` tasks is due for a restart."""
+    if tasks_per_worker is not None and finished >= tasks_per_worker:
+        return True
+    if memory:
+        import psutil  # a dependency of distributed
+
+        return psutil.Process().memory_info().rss > RECYCLE_SHARE * memory
+    return False
+
+
+def _retire() -> None:
+    """Pause this worker from its task's thread, so nothing starts after the task
+    (the scheduler hands a paused worker no task, and the worker starts none of those
+    queued on it), then restart it under its nanny once the results are taken."""
+    import asyncio
+
+    from distributed import get_worker
+
+    worker = get_worker()
+    loop = worker.loop.asyncio_loop
+    asyncio.run_coroutine_threadsafe(_pause(worker), loop).result()
+    loop.call_soon_threadsafe(lambda: asyncio.ensure_future(_leave(worker)))
+
+
+async def _pause(worker) -> None:
+    from distributed.core import Status
+
+    if worker.status == Status.running:
+        worker.status = Status.paused
+
+
+async def _leave(worker) -> None:
+    """A graceful close with a restart, after the client took what this worker holds:
+    results lost with it would be computed again."""
+    import asyncio
+
+    deadline = time.monotonic() + HANDOVER_SECONDS
+    while (worker.state.executing_count or worker.data) and time.monotonic() < deadline:
+        await asyncio.sleep(0.05)
+    await worker.close_gracefully(restart=True, reason="twin: worker recycled")
+
+
+class _Slot:
+    """A worker's place among the LocalCluster's (its name), where init_worker takes
+    it from the local pool's shared counter: the CPU it keeps to on a one-core task."""
+
+    def __init__(self, value: int):
+        self.value = value
+
+    def get_lock(self):
+        return nullcontext()
+
+
+def _worker_plugin_class():
+    from distributed import WorkerPlugin
+
+    class Setup(WorkerPlugin):
+        """What each worker does when it starts (a restarted one too): the local pool's
+        set-up (executors.init_worker) when `threads` is given, then `preload`
+        imported once."""
+
+        name = "twin-setup"
+
+        def __init__(self, threads: int | None, cpus: tuple[int, ...], address_space: int | None,
+                     preload: tuple[str, ...]):
+            self.threads, self.cpus, self.address_space, self.preload = threads, cpus, address_space, preload
+
+        def setup(self, worker):
+            from .executors import init_worker
+
+            if self.threads is not None:
+                slot = _Slot(worker.name) if self.cpus and isinstance(worker.name, int) else None
+                init_worker(self.threads, self.cpus, slot, self.address_space)
+            for name in self.preload:
+                importlib.import_module(name)
+
+    return Setup
+
+
+# --- in this process ---------------------------------------------------------------
+
+
+class DaskExecutor(Executor):
+    """`concurrent.futures` over a dask Client: each call is a task of its own
+    (pure=False: never merged with an equal call), its result handed back and let go
+    on the worker at once. `lost`: what a call whose workers all died returns instead
+    of raising dask's KilledWorker (None: it raises). Shutting down closes the client,
+    and the cluster when this executor started it."""
+
+    def __init__(self, client, cluster=None, *, tasks_per_worker: int | None = None, memory: int | None = None,
+                 lost: Callable[[Exception], object] | None = None, plugin: str | None = None):
+        self.client, self.cluster = client, cluster
+        self.tasks_per_worker, self.memory, self.lost, self.plugin = tasks_per_worker, memory, lost, plugin
+        self._futures: set = set()  # dask futures not yet settled
+        self._closed = False
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        if self._closed:
+            raise RuntimeError("cannot submit to a dask executor after shutdown")
+        key = f"{getattr(fn, '__name__', 'call')}-{uuid.uuid4().hex}"
+        future = self.client.submit(call, fn, args, kwargs, self.tasks_per_worker, self.memory, key=key,
+                                    pure=False)
+        result: Future = Future()
+        self._futures.add(future)
+        future.add_done_callback(lambda f: self._settle(f, result))
+        return result
+
+    def _settle(self, future, result: Future) -> None:
+        """The dask future's outcome onto `result` (in dask's callback thread)."""
+        from distributed import KilledWorker
+
+        try:
+            value = future.result()
+        except KilledWorker as e:
+            if self.lost is None:
+                _set(result, exception=e)
+            else:
+                _set(result, value=self.lost(e))
+        except CancelledError:
+            if result.cancel():
+                result.set_running_or_notify_cancel()  # wakes concurrent.futures.wait
+        except BaseException as e:  # noqa: BLE001 - the call's own error, as a pool hands it back
+            _set(result, exception=e)
+        else:
+            _set(result, value=value)
+        finally:
+            self._futures.discard(future)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Cancel what has not finished (`cancel_futures`) or wait for it (`wait`), then
+        close the client and the cluster this executor started."""
+        if self._closed:
+            return
+        self._closed = True
+        outstanding = list(self._futures)
+        try:
+            if cancel_futures and outstanding:
+                self.client.cancel(outstanding)
+            elif wait and outstanding:
+                from distributed import wait as dask_wait
+
+                dask_wait(outstanding)
+            if self.plugin is not None and self.cluster is None:
+                # a shared scheduler keeps its plugins for workers that join later
+                try:
+                    self.client.unregister_worker_plugin(self.plugin)
+                except Exception:  # noqa: BLE001 - the cluster may be gone already
+                    pass
+        finally:
+            try:
+                self.client.close()
+            finally:
+                if self.cluster is not None:
+                    self.cluster.close()
+
+
+def _set(result: Future, value=None, exception: BaseException | None = None) -> None:
+    if result.done():  # cancelled meanwhile
+        return
+    if exception is not None:
+        result.set_exception(exception)
+    else:
+        result.set_result(value)
+
+
+def start(workers: int, scheduler: str | None = None, *, threads: int | None = None, cpus: tuple[int, ...] = (),
+          address_space: int | None = None, preload: tuple[str, ...] = (), memory: int | None = None,
+          tasks_per_worker: int | None = None, lost: Callable[[Exception], object] | None = None,
+          executor_class: type[DaskExecutor] = DaskExecutor) -> DaskExecutor:
+    """A DaskExecutor on a new LocalCluster of `workers` processes (no `scheduler`) or
+    on the cluster at `scheduler`. `threads`: each worker's native thread pools and
+    fork_join.beside share (executors.init_worker, with `cpus` and `address_space`);
+    `memory`: bytes a worker may hold (the nanny's limit on a LocalCluster, and the
+    recycling rule everywhere)."""
+    try:
+        import dask
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise UserError(None, None, INSTALL_HINT) from None
+    from .executors import THREAD_VARIABLES
+
+    Setup = _worker_plugin_class()
+    plugin = Setup(threads, cpus if scheduler is None else (), address_space, tuple(preload))
+    cluster = None
+    if scheduler is None:
+        # in the workers only: a variable the user set is kept, as in the local pool
+        share = str(threads or max(1, (os.cpu_count() or 1) // max(1, workers)))
+        env = {name: os.environ.get(name, share) for name in THREAD_VARIABLES}
+        # the nanny sets its pre-spawn variables in this process too; "random" is
+        # Python's own default, where dask would fix the seed of later subprocesses
+        spawn = {"PYTHONHASHSEED": os.environ.get("PYTHONHASHSEED", "random")}
+        with dask.config.set({**LOCAL_CONFIG, "distributed.nanny.pre-spawn-environ": spawn}):
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=None, silence_logs=int(os.environ.get("TWIN_DASK_LOGS", logging.CRITICAL)),
+                                   memory_limit=memory or 0, env=env)
+        client = Client(cluster, set_as_default=False)
+    else:
+        try:
+            client = Client(scheduler, set_as_default=False, timeout="20s")
+        except (OSError, TimeoutError) as e:
+            raise UserError(None, None, f"cannot reach the dask scheduler at {scheduler}: {e}") from None
+    try:
+        try:
+            client.register_plugin(plugin)
+        except ImportError as e:
+            raise UserError(None, None, f"a dask worker cannot import {e.name or e}: "
+                                        "install it where the workers run") from None
+    except BaseException:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+        raise
+    return executor_class(client, cluster, tasks_per_worker=tasks_per_worker, memory=memory, lost=lost,
+                          plugin=Setup.name)
+
+
+@contextmanager
+def dask_executor(workers: int, scheduler: str | None = None, *, preload: tuple[str, ...] = (),
+                  memory: int | None = None, tasks_per_worker: int | None = None) -> Iterator[Executor]:
+    """An Executor on dask for the block: `workers` processes on a LocalCluster of this
+    machine (no `scheduler`), or the cluster at the `scheduler` address (workers see
+    the same paths as this process). `preload`: modules each worker imports once when
+    it starts ("bpy"); `memory`: bytes a worker may hold before it is recycled
+    (RECYCLE_SHARE of it, between tasks) or, on a LocalCluster, terminated mid-task;
+    `tasks_per_worker`: tasks a worker runs before it is recycled. The cluster is
+    closed when the block ends, whatever ends it."""
+    executor = start(workers, scheduler, preload=preload, memory=memory, tasks_per_worker=tasks_per_worker)
+    try:
+        yield executor
+    finally:
+        executor.shutdown(wait=False, cancel_futures=True)
+
+
+# --- the build's --------------------------------------------------------------------
+
+
+class BuildExecutor(DaskExecutor):
+    """The build's tasks each in an empty staging folder: dask reruns a task whose
+    worker died elsewhere, and what the dead attempt left must not enter the cache."""
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        from .executors import run_task
+
+        return super().submit(run_afresh if fn is run_task else fn, *args, **kwargs)
+
+
+def run_afresh(action, args: dict, staging: str, cores: int | None = None) -> dict:
+    """executors.run_task in a staging folder emptied first."""
+    from .executors import run_task
+
+    shutil.rmtree(staging, ignore_errors=True)
+    Path(staging).mkdir(parents=True)
+    return run_task(action, args, staging, cores)
+
+
+def worker_died(error: Exception) -> dict:
+    """A task whose workers all died, as the scheduler reports a local worker's death."""
+    tries = getattr(error, "allowed_failures", 0) + 1
+    times = f" ({tries} workers in turn)" if tries > 1 else ""
+    return {"ok": False, "error": f"its worker process died{times}", "kind": "worker"}
+
+
+def dask_pool(workers: Workers, scheduler: str | None = None, tasks_per_worker: int | None = None) -> Executor:
+    """The build's executor on dask (EXECUTORS["dask"]): `workers.count` worker processes
+    on a LocalCluster, set up as the local pool's (thread variables, CPUs, address-space
+    limit), or the cluster at `scheduler`, whose workers must see the build folder and
+    the sources at the same paths as this process."""
+    return start(workers.count, scheduler, threads=workers.threads, cpus=workers.cpus,
+                 address_space=workers.memory, memory=workers.memory, tasks_per_worker=tasks_per_worker,
+                 lost=worker_died, executor_class=BuildExecutor)
