@@ -2,7 +2,8 @@
 and the asset a LodInfo per level.
 
 The caller passes in what lies outside geometry: the memo of the level search, the
-validator's verdict on one visual's mesh, and the cores the search may use.
+checks' verdict on one visual's mesh (findings.visual_verdict, which stands on
+geometry), and the cores the search may use.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from . import clean as _clean
 from .simplify import ITERATIONS, METHODS, Memo, Simplified, Workers, simplify_levels
 from .transform import linear_scale
 
-# What the validator holds against one mesh on its own: its error codes, and its
+# What the checks hold against one mesh on its own: its error codes, and its
 # (non-manifold, inconsistently wound) edge counts. A coarser level of a visual may
 # have neither a code nor an edge of either kind more than its finer level.
 Verdict = Callable[[ir.Mesh], tuple[frozenset[str], tuple[int, int]]]
@@ -58,8 +59,8 @@ def lod_chain(options: LodOptions = LodOptions(), memo: Memo | None = None, verd
     bindings) repeat their Mesh object at every level; a part that would vanish keeps
     its previous level's mesh, so nothing disappears.
 
-    `memo`: see simplify_levels. `verdict`: the validator's judgement of one visual's
-    mesh; with it, a visual whose coarser mesh it judges worse keeps its finer one
+    `memo`: see simplify_levels. `verdict`: the checks' judgement of one visual's
+    mesh (findings.visual_verdict); with it, a visual whose coarser mesh it judges worse keeps its finer one
     (None: no such judgement). `workers`: see simplify_levels.
     """
     budgets = tuple(float(b) for b in options.budgets_m)

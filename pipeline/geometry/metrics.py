@@ -41,8 +41,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, unused=(0.0, 0.0, 0.
     """(n, 3) unit area-weighted vertex normals; `unused` where no face gives a
     direction (the exporters' +Z keeps every normal a unit vector: validators reject
     others). Summed corner by corner in face order, as np.add.at would (the same bits),
-    by np.bincount, a tenth of its time: a package's meshes without normals spent
-    0.085 s in np.add.at."""
+    by np.bincount, which takes a fraction of np.add.at's time."""
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
@@ -139,9 +138,9 @@ class SurfaceDistance:
     Two stages: fcpw's BVH (float32, its own threads) finds each point's face and the
     distance to that face is computed in float64; libigl's AABB tree (float64, built
     on first need) then measures exactly the distances that decide something. fcpw
-    alone measured 1.9 to 2.5 times faster than libigl on the sample's LOD queries,
-    but its float32 arithmetic on a sliver picked faces up to 3.2 mm farther than the
-    nearest (rigid_busbar), which turned a passing LOD candidate into a failing one.
+    alone is the faster, but its float32 arithmetic can pick, on a sliver, a face
+    millimetres farther than the nearest, which turns a passing LOD candidate into a
+    failing one.
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray | None = None):
