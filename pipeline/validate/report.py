@@ -25,7 +25,7 @@ from pathlib import Path
 from lxml import etree
 
 from ..errors import UserError
-from ..findings import RULES, Finding, sort_findings
+from ..findings import RULES, Finding
 from . import external, gazebo
 from .checks import check_package
 
