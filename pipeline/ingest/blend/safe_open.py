@@ -46,8 +46,8 @@ def open_untrusted(path: Path) -> None:
     import bpy
 
     # Both switches: the preference governs later reloads, `use_scripts=False` this
-    # load; with them off Blender neither runs registered text blocks nor evaluates
-    # Python-expression drivers.
+    # load; with them off Blender runs no registered text block, and no driver
+    # expression beyond its math-only whitelist (mute_python_drivers mutes those too).
     bpy.context.preferences.filepaths.use_scripts_auto_execute = False
     try:
         with _quiet_stdout():
