@@ -14,8 +14,6 @@ All arrays are float64. `xy` is always plant-grid metres, shape (n, 2).
 from __future__ import annotations
 
 import math
-import time
-from pathlib import Path
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -206,70 +204,3 @@ class Georeferencer:
         xy = np.array([(p.x, p.y) for p in pl], dtype=np.float64)
         h = np.array([self.site.level(p.level).elevation + p.z for p in pl], dtype=np.float64)
         return self.to_enu(xy, h), self.headings(xy, np.array([p.heading_deg for p in pl]))
-
-
-# --- benchmark -------------------------------------------------------------------
-
-
-def _best_time(fn, repeats: int = 3) -> float:
-    best = math.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
-def bench_georef(site=None, platforms: Sequence[ir.Platform] | None = None, n: int = 1_000_000) -> dict:
-    """Speed and accuracy of exact vs naive georeferencing, for `twin bench`.
-
-    Defaults to the sample site (sources/site.toml and its floor plan). Reports points
-    per second of both methods on n points, and the naive method's error (3D and
-    horizontal, metres) at the far corner of the platforms and over a 50 x 50 grid
-    covering them (max and median).
-    """
-    if site is None:
-        from .config import load_site
-
-        site = load_site(Path(__file__).resolve().parent.parent / "sources" / "site.toml")
-    if platforms is None:
-        from .ingest.floorplan import read_floorplan
-
-        platforms = read_floorplan(site.root / site.floorplan, levels=set(site.level_names)).platforms
-    origin = site.origin or default_origin(site, platforms)
-    g = Georeferencer(site, origin)
-    h0 = min(lv.elevation for lv in site.levels)
-
-    pts = np.concatenate([np.asarray(p.outline) for p in platforms])
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    rng = np.random.default_rng(0)
-    xy = lo + rng.random((n, 2)) * (hi - lo)
-    h = np.full(n, h0)
-    t_exact = _best_time(lambda: g.to_enu(xy, h))
-    t_naive = _best_time(lambda: g.naive_enu(xy, h))
-
-    def err(q):
-        d = g.naive_enu(q, h0) - g.to_enu(q, h0)
-        return np.linalg.norm(d, axis=1), np.linalg.norm(d[:, :2], axis=1)
-
-    exact = g.to_enu(pts, h0)
-    far = pts[np.argmax(np.hypot(exact[:, 0], exact[:, 1]))][None, :]
-    far_3d, far_h = err(far)
-    gx, gy = np.meshgrid(np.linspace(lo[0], hi[0], 50), np.linspace(lo[1], hi[1], 50))
-    grid_3d, grid_h = err(np.stack([gx.ravel(), gy.ravel()], axis=1))
-    from pyproj import Proj
-
-    f = Proj(CRS.from_user_input(site.crs)).get_factors(origin[1], origin[0])
-    return {
-        "points": n,
-        "exact_points_per_s": n / t_exact,
-        "naive_points_per_s": n / t_naive,
-        "far_corner_distance_m": float(np.hypot(*g.to_enu(far, h0)[0, :2])),
-        "naive_error_far_corner_m": float(far_3d[0]),
-        "naive_error_far_corner_horizontal_m": float(far_h[0]),
-        "naive_error_grid_max_m": float(grid_3d.max()),
-        "naive_error_grid_median_m": float(np.median(grid_3d)),
-        "grid_points": int(grid_3d.size),
-        "meridian_convergence_deg": float(f.meridian_convergence),
-        "scale_factor": float(f.meridional_scale),
-    }

@@ -12,9 +12,10 @@ import pytest
 from pyproj import Proj, Transformer
 
 from pipeline import ir
+from pipeline.bench.georef import bench_georef
 from pipeline.config import load_site
 from pipeline.errors import UserError
-from pipeline.georef import Georeferencer, bench_georef, crs_to_plan, default_origin, plan_to_crs
+from pipeline.georef import Georeferencer, crs_to_plan, default_origin, plan_to_crs
 from pipeline.ingest.floorplan import read_floorplan
 
 SITE_TOML = Path(__file__).resolve().parent.parent / "sources" / "site.toml"

@@ -1,12 +1,11 @@
-"""The measuring sections that call other layers' bench functions: LOD simplifiers,
-georeferencing, sun, runtime. Each returns plain JSON-able data; the harness guards
-each call, so a missing or failing bench function becomes an error entry.
+"""The measuring sections: LOD simplifiers, georeferencing, sun, runtime, render. Each
+returns plain JSON-able data; the harness guards each call, so a failing section
+becomes an error entry.
 """
 
 from __future__ import annotations
 
 import datetime as dt
-import importlib
 import math
 import statistics
 from pathlib import Path
@@ -15,11 +14,6 @@ import numpy as np
 
 from .context import Context
 from .stats import summarize, timed
-
-
-def _bench_fn(module: str, name: str):
-    """A bench function of another layer, imported lazily (it may not exist yet)."""
-    return getattr(importlib.import_module(module), name)
 
 
 # --- LOD -----------------------------------------------------------------------------
@@ -97,11 +91,13 @@ def _site(sources: Path):
 
 
 def georef_section(ctx: Context) -> dict:
+    from .georef import bench_georef
+
     site, platforms, g = _site(ctx.sources)
     n = ctx.pick(100_000, 1_000_000)
     data: dict = {}
     try:
-        data["bench_georef"] = _bench_fn("pipeline.georef", "bench_georef")(site=site, platforms=platforms, n=n)
+        data["bench_georef"] = bench_georef(site=site, platforms=platforms, n=n)
     except Exception as e:  # keep our own figures below
         data["bench_georef_error"] = f"{type(e).__name__}: {e}"
     h0 = min(lv.elevation for lv in site.levels)
@@ -140,7 +136,8 @@ def georef_section(ctx: Context) -> dict:
 def sun_section(ctx: Context, runtime: dict | None) -> dict:
     """The study's theta = 90 sin(pi tau) against astral's ephemeris over a year at the
     site: our own day x hour map (for the plot), plus the runtime bench's figures."""
-    sun = importlib.import_module("pipeline.runtime.sun")
+    from ..runtime import sun
+
     site, _, g = _site(ctx.sources)
     lat, lon = g.origin_llh[0], g.origin_llh[1]
     tz = site.zone
@@ -182,12 +179,13 @@ def _noon_errors(sun, lat, lon, tz, year, days) -> list[float]:
 
 
 def runtime_section(ctx: Context) -> dict:
-    bench = _bench_fn("pipeline.runtime.bench", "bench_runtime")
+    from .runtime import bench_runtime
+
     site, _, g = _site(ctx.sources)
     where = (g.origin_llh[0], g.origin_llh[1], site.zone)
     if ctx.quick:
-        return bench(where, repeats=5, sizes=(100, 1_000))
-    return bench(where)
+        return bench_runtime(where, repeats=5, sizes=(100, 1_000))
+    return bench_runtime(where)
 
 
 # --- render --------------------------------------------------------------------------
