@@ -163,6 +163,31 @@ def render(scenario: Path | None, study: bool, out: Path):
 
 
 @main.command()
+@click.argument("config", type=click.Path(path_type=Path))
+@SOURCES
+@OUT
+@click.option("--frames", type=click.IntRange(min=1), default=None,
+              help="render the first N frames of the config's sequence (default: its count)")
+@click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
+              help="where frames render: worker processes here, or dask.distributed")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="a dask scheduler's address (default: a local cluster); its workers must see OUT and "
+                   "the sources at the same paths")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="frames rendered at once (each renders on 2 threads)")
+@user_errors
+def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor: str, scheduler: str | None,
+            workers: int):
+    """Render a labelled image set (images, instance masks, depth, COCO, frames.jsonl)
+    from the built scene OUT into OUT/datasets/<name>/; a stopped run resumes."""
+    from .runtime.render.dataset import run_dataset
+
+    folder = run_dataset(config, out, frames=frames, executor=executor, scheduler=scheduler, workers=workers,
+                         sources=sources)
+    click.echo(str(folder))
+
+
+@main.command()
 @OUT
 @click.option("--port", type=click.IntRange(0, 65535), default=8000, show_default=True,
               help="port on 127.0.0.1 (0: any free one)")

@@ -69,6 +69,7 @@ class CyclesScene:
         self.roots: dict[str, object] = {}  # tag -> root object
         self.objects: dict[str, dict[str, object]] = {}  # tag -> visual name -> object
         self.prototypes: dict[str, str] = {}  # asset -> tag imported first
+        self._rest: dict[str, dict[str, object]] = {}  # tag -> link -> rest matrix_basis (set_joints)
         self._world()
         self._camera()
         self.tmp = Path(tempfile.mkdtemp(prefix="twin_render_"))
@@ -277,6 +278,91 @@ class CyclesScene:
         w, h = img.size
         bpy.data.images.remove(img)
         return px.reshape(h, w, 4)[::-1, :, :3].copy()
+
+
+    # -- datasets: what each pixel shows
+    def set_instances(self, ids: dict[str, int]) -> None:
+        """Each loaded placement's objects carry its instance id (Cycles' object index);
+        the terrain and anything unlisted carry 0, the background's."""
+        for tag, objs in self.objects.items():
+            for ob in objs.values():
+                ob.pass_index = ids.get(tag, 0)
+
+    def show_only(self, tags) -> None:
+        """Render just these placements (and the terrain): a frame's content is its own
+        culled set, whatever else the scene holds."""
+        keep = set(tags) | {"__terrain__"}
+        for tag, objs in self.objects.items():
+            for ob in objs.values():
+                ob.hide_render = tag not in keep
+
+    def set_joints(self, tag: str, manifest: dict, values: dict[str, float]) -> None:
+        """Revolute joints of a placement at `values` (rad): each child link's node
+        turns about the joint's axis from its rest pose (the link frames of a package
+        sit on their joints, parented along the kinematic tree)."""
+        from mathutils import Matrix, Vector
+
+        objs = self.objects.get(tag, {})
+        rest = self._rest.setdefault(tag, {})
+        for j in manifest.get("joints", []):
+            ob = objs.get(j["child"])
+            if ob is None or j["name"] not in values:
+                continue
+            basis = rest.setdefault(j["child"], ob.matrix_basis.copy())
+            ob.matrix_basis = basis @ Matrix.Rotation(float(values[j["name"]]), 4, Vector(j["axis"]))
+
+    def set_sky(self, aerosol: float) -> None:
+        self.sky.aerosol_density = float(aerosol)
+
+    def render_labels(self) -> tuple[np.ndarray, np.ndarray]:
+        """(instance ids uint16, planar depth float32 in metres, inf where nothing) of
+        the current frame, from Cycles itself: every surface replaced by an emission of
+        (object index, view Z depth), one sample through each pixel's centre, so the
+        ids are whole numbers and never blend across an edge."""
+        bpy, s = self.bpy, self.scene
+        layer = bpy.context.view_layer
+        saved = (s.cycles.samples, s.cycles.use_denoising, s.cycles.filter_width, s.world, layer.material_override)
+        try:
+            s.cycles.samples, s.cycles.use_denoising, s.cycles.filter_width = 1, False, 0.01
+            s.world = self._label_world()
+            layer.material_override = self._label_material()
+            px = self.render()
+        finally:
+            (s.cycles.samples, s.cycles.use_denoising, s.cycles.filter_width, s.world,
+             layer.material_override) = saved
+        ids = np.rint(px[..., 0]).astype(np.uint16)
+        depth = px[..., 1].astype(np.float32)
+        depth[ids == 0] = np.inf
+        return ids, depth
+
+    def _label_material(self):
+        bpy = self.bpy
+        mat = bpy.data.materials.get("__labels__")
+        if mat is not None:
+            return mat
+        mat = bpy.data.materials.new("__labels__")
+        mat.use_nodes = True
+        nt = mat.node_tree
+        for n in list(nt.nodes):
+            nt.nodes.remove(n)
+        info, cam = nt.nodes.new("ShaderNodeObjectInfo"), nt.nodes.new("ShaderNodeCameraData")
+        rgb, emit = nt.nodes.new("ShaderNodeCombineColor"), nt.nodes.new("ShaderNodeEmission")
+        out = nt.nodes.new("ShaderNodeOutputMaterial")
+        nt.links.new(info.outputs["Object Index"], rgb.inputs[0])
+        nt.links.new(cam.outputs["View Z Depth"], rgb.inputs[1])
+        nt.links.new(rgb.outputs[0], emit.inputs["Color"])
+        emit.inputs["Strength"].default_value = 1.0
+        nt.links.new(emit.outputs[0], out.inputs["Surface"])
+        return mat
+
+    def _label_world(self):
+        bpy = self.bpy
+        w = bpy.data.worlds.get("__labels__")
+        if w is None:
+            w = bpy.data.worlds.new("__labels__")
+            w.use_nodes = True
+            w.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+        return w
 
 
 LOD_NODE = re.compile(r"__lod[1-9][0-9]*$")  # export/gltf.py names lower LODs so

@@ -1,0 +1,274 @@
+"""`twin dataset CONFIG`: labelled image sets from a built scene.
+
+    OUT/datasets/<name>/
+        images/<frame_id>.png    the phone's picture (8-bit sRGB)
+        masks/<frame_id>.png     16-bit instance ids, 0 = background
+        depth/<frame_id>.npy     float32 planar depth (m) along the optical axis, inf = sky
+        records/<frame_id>.json  one frame's labels and annotations (what a resumed run keeps)
+        frames.jsonl, coco.json  the first N frames' records, assembled at the end
+        dataset.json             config digest, frames, renderer; timings.json: seconds
+
+Frames are independent tasks: frame i is a function of (config, built scene, i) alone
+(dataset_plan.py), rendered in a scene that holds the same placements whichever worker
+renders it (the union of every frame's culled set), showing only its own. So the bytes
+do not depend on the executor, the number of workers or the order, a run of N frames
+is the first N of a longer one, and a killed run resumes by rendering the frames whose
+record is missing (every file is written by rename; the record last).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from concurrent.futures import Executor, as_completed
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ...errors import UserError
+from ...files import atomic_path, atomic_write
+from . import dataset_config, labels
+from .dataset_plan import FramePlan, Planner, frame_id, switch_angles
+from .pinhole import intrinsics
+from .sensor import PhoneCamera
+from .site import Site, load_site
+
+RENDERER = "blender-cycles-cpu"
+FOLDERS = ("images", "masks", "depth", "records")
+
+
+# --- the run (the calling process) -------------------------------------------------------
+
+
+def run_dataset(config_path, out, *, frames: int | None = None, executor: str = "local",
+                scheduler: str | None = None, workers: int = 1, sources: Path | None = None,
+                progress=None) -> Path:
+    """Render the config's first `frames` frames (all by default) that are not on disk
+    yet, then write frames.jsonl and coco.json. Returns the dataset's folder."""
+    cfg = dataset_config.load(config_path)
+    out = Path(out)
+    sources = Path(sources) if sources else Path(__file__).resolve().parents[3] / "sources"
+    site = load_site(out, sources)
+    n = cfg.count if frames is None else frames
+    if n < 1:
+        raise UserError(cfg.path, "--frames", "at least one frame")
+    folder = out / "datasets" / cfg.name
+    _claim(folder, cfg)
+    planner = Planner(cfg, site, sources)
+    t0 = time.perf_counter()
+    union = sorted({t for i in range(cfg.count) for t in planner.plan(i).visible_tags})
+    plan_s = time.perf_counter() - t0
+    todo = [i for i in range(n) if not _done(folder, i)]
+    job = {"build": str(out), "sources": str(sources), "config": str(Path(config_path).resolve()),
+           "folder": str(folder), "union": union}
+    t0 = time.perf_counter()
+    seconds = []
+    if todo:
+        with _executor(executor, workers, scheduler, cfg.sensor.tasks_per_worker) as pool:
+            futures = [pool.submit(render_frame, job, i) for i in todo]
+            for f in as_completed(futures):
+                result = f.result()
+                if not result["ok"]:
+                    raise UserError(cfg.path, f"frame {result['frame_id']}", result["error"])
+                seconds.append(result["seconds"])
+                if progress:
+                    progress(len(seconds), len(todo))
+    wall = time.perf_counter() - t0
+    _assemble(folder, cfg, site, n)
+    atomic_write(folder / "timings.json", json.dumps(
+        {"frames": n, "rendered": len(todo), "executor": executor, "workers": workers, "plan_s": plan_s,
+         "wall_s": wall, "frame_s": seconds, "scene_placements": len(union)}, indent=1, sort_keys=True) + "\n")
+    return folder
+
+
+def _claim(folder: Path, cfg) -> None:
+    """A dataset folder belongs to one config: resuming with another would mix frames."""
+    stamp = folder / "dataset.json"
+    if stamp.is_file():
+        try:
+            digest = json.loads(stamp.read_text()).get("config_sha256")
+        except (OSError, json.JSONDecodeError):
+            digest = None
+        if digest != cfg.digest:
+            raise UserError(stamp, cfg.name, "made from another version of the config: delete the folder or "
+                                             "change dataset.name to start a new dataset")
+    for sub in FOLDERS:
+        (folder / sub).mkdir(parents=True, exist_ok=True)
+    atomic_write(stamp, json.dumps({"dataset": cfg.name, "config": cfg.path.name, "config_sha256": cfg.digest,
+                                    "seed": cfg.seed, "count": cfg.count, "renderer": RENDERER},
+                                   indent=1, sort_keys=True) + "\n")
+
+
+def _done(folder: Path, index: int) -> bool:
+    fid = frame_id(index)
+    return all((folder / p).is_file() for p in (f"records/{fid}.json", f"images/{fid}.png", f"masks/{fid}.png",
+                                                f"depth/{fid}.npy"))
+
+
+def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
+    records = [json.loads((folder / "records" / f"{frame_id(i)}.json").read_text()) for i in range(n)]
+    lines = [json.dumps({k: v for k, v in r.items() if k != "annotations"}, sort_keys=True,
+                        separators=(",", ":")) for r in records]
+    atomic_write(folder / "frames.jsonl", "\n".join(lines) + "\n")
+    images, anns = [], []
+    for i, r in enumerate(records):
+        images.append({"id": i + 1, "file_name": r["image"], "width": r["camera"]["width"],
+                       "height": r["camera"]["height"], "frame_id": r["frame_id"]})
+        for a in r["annotations"]:
+            anns.append({"id": len(anns) + 1, "image_id": i + 1, **a})
+    coco = {"info": {"description": f"substation-twin dataset {cfg.name}", "version": cfg.digest[:12],
+                     "year": int(records[0]["local_time"][:4]) if records else 0},
+            "licenses": [], "images": images, "annotations": anns,
+            "categories": labels.categories(site.manifests)}
+    atomic_write(folder / "coco.json", json.dumps(coco, sort_keys=True, separators=(",", ":")) + "\n")
+
+
+@contextmanager
+def _executor(kind: str, workers: int, scheduler: str | None, tasks_per_worker: int) -> Iterator[Executor]:
+    if kind == "dask":
+        from ...builder.dask_executor import dask_executor
+
+        with dask_executor(workers, scheduler, preload=("bpy",), tasks_per_worker=tasks_per_worker) as pool:
+            yield pool
+        return
+    if kind != "local":
+        raise UserError(None, "--executor", f"{kind!r}: local or dask")
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # spawned: Blender does not survive a fork; replaced every tasks_per_worker frames
+    # so a long run's memory stays that of a fresh worker
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               max_tasks_per_child=tasks_per_worker)
+    try:
+        yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+# --- one frame (a worker) -----------------------------------------------------------------
+
+_WORKER: dict = {}  # the scene a worker keeps between frames of one dataset
+
+
+def render_frame(job: dict, index: int) -> dict:
+    """Render, label and write frame `index`; errors come back as data."""
+    fid = frame_id(index)
+    try:
+        t0 = time.perf_counter()
+        ctx = _context(job)
+        _frame(ctx, Path(job["folder"]), ctx["planner"].plan(index))
+        return {"ok": True, "frame_id": fid, "seconds": time.perf_counter() - t0}
+    except UserError as e:
+        return {"ok": False, "frame_id": fid, "error": str(e)}
+    except Exception as e:  # noqa: BLE001 - the run reports it with the frame it stopped at
+        import traceback
+
+        return {"ok": False, "frame_id": fid, "error": f"{type(e).__name__}: {e}\n{traceback.format_exc()}"}
+
+
+def _context(job: dict) -> dict:
+    key = json.dumps(job, sort_keys=True)
+    if _WORKER.get("key") == key:
+        return _WORKER
+    from .cycles import CyclesScene
+
+    if _WORKER.get("scene") is not None:
+        _WORKER["scene"].close()
+    cfg = dataset_config.load(job["config"])
+    site = load_site(Path(job["build"]), Path(job["sources"]))
+    cam = PhoneCamera(width=cfg.sensor.width, height=cfg.sensor.height, samples=cfg.sensor.samples,
+                      render_denoise=cfg.sensor.render_denoise)
+    scene = CyclesScene(site, cam, cfg.seed)
+    for tag in job["union"]:
+        scene.load(tag)
+    scene.load_terrain()
+    poles = [t for t in job["union"] if site.placement(t)["asset"] == "lighting_pole"]
+    scene.add_lamps(poles)
+    ids = labels.instance_ids(site.placements)
+    scene.set_instances(ids)
+    cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
+    category_of = {p["tag"]: cats.get(site.manifests.get(p["asset"], {}).get("category") or p["asset"], 0)
+                   for p in site.placements}
+    _WORKER.clear()
+    _WORKER.update(key=key, cfg=cfg, site=site, cam=cam, scene=scene, ids=ids,
+                   tag_of={v: k for k, v in ids.items()}, category_of=category_of,
+                   planner=Planner(cfg, site, Path(job["sources"])))
+    return _WORKER
+
+
+def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
+    from .frames import develop_shot, pointer_binding
+
+    site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
+    scene.scene.cycles.seed = plan.seed
+    scene.show_only(plan.visible_tags)
+    for tag, position in plan.switches.items():
+        if tag in scene.objects:
+            m = site.manifests[site.placement(tag)["asset"]]
+            scene.set_joints(tag, m, switch_angles(m, position))
+    scene.set_shot(shot, pointer_binding(site, shot.target) if shot.target else None)
+    scene.set_sky(plan.aerosol)
+    linear = scene.render()
+    rgb, gain, wb, veil = develop_shot(scene, shot, linear, cam, None, plan.seed)
+    ids, depth = scene.render_labels()
+    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
+    record = _record(ctx, plan, k, ids, depth, gain, wb, veil)
+    fid = plan.frame_id
+    _write_png(folder / "images" / f"{fid}.png", rgb[..., ::-1])
+    _write_png(folder / "masks" / f"{fid}.png", ids)
+    with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, depth, allow_pickle=False)
+    atomic_write(folder / "records" / f"{fid}.json", json.dumps(record, sort_keys=True, indent=1) + "\n")
+
+
+def _write_png(path: Path, pixels: np.ndarray) -> None:
+    """PNG through OpenCV (no timestamps; 16-bit when the array is): BGR or one channel."""
+    import cv2
+
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(pixels))
+    if not ok:
+        raise RuntimeError(f"could not encode {path}")
+    atomic_write(path, buf.tobytes())
+
+
+def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, gain: float,
+            wb: np.ndarray, veil: float) -> dict:
+    site, shot, fid = ctx["site"], plan.shot, plan.frame_id
+    gauges = []
+    for p in site.placements:
+        m = site.manifests.get(p["asset"], {})
+        rotate = any(b["effect"] == "rotate" for b in m.get("bindings", []))
+        if not rotate or p["tag"] not in plan.oil_levels:
+            continue
+        seen = labels.gauge_visibility(site.pose(p), shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
+        gauges.append({"tag": p["tag"], "reading": plan.oil_levels[p["tag"]].get("oil_level_tank"),
+                       "unit": "%", **seen})
+    kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
+    return {
+        "frame_id": fid, "index": plan.index, "seed": plan.seed,
+        "image": f"images/{fid}.png", "mask": f"masks/{fid}.png", "depth": f"depth/{fid}.npy",
+        "camera": {"name": plan.camera, "K": kmat, "pose": shot.cam_pose.tolist(), "width": k["width"],
+                   "height": k["height"], "zoom": shot.lens.zoom, "hfov_deg": math.degrees(k["hfov"]),
+                   "near": shot.lens.near, "far": shot.lens.far, "target": shot.target,
+                   "convention": "pose: world-from-camera, ENU metres; the camera looks down its -Z, +Y up; "
+                                 "pixel (0, 0) is the top-left corner of the top-left pixel"},
+        "exposure": {"gain": gain, "white_balance": [float(v) for v in wb], "veil": veil},
+        "sun": {"azimuth_deg": math.degrees(shot.sun_azimuth), "elevation_deg": math.degrees(shot.sun_elevation),
+                "irradiance": shot.irradiance, "irradiance_unit": "W/m2, direct on a horizontal surface"},
+        "sky": {"tau_atm": plan.tau_atm, "aerosol_density": plan.aerosol},
+        "local_time": shot.when.isoformat(),
+        "states": {"oil_levels": plan.oil_levels, "switches": plan.switches},
+        "gauges": gauges,
+        "instances": int(len(np.unique(ids[ids > 0]))),
+        "annotations": labels.annotations(ids, ctx["tag_of"], ctx["category_of"]),
+    }
+
+
+def worker_count(requested: int | None) -> int:
+    return max(1, requested or (os.cpu_count() or 1))

@@ -1,0 +1,69 @@
+"""Per-frame ground truth from the renderer's own passes: COCO instance annotations
+(RLE masks, tight boxes, pixel areas) from the instance-id image, and gauge visibility
+from the ids and the depth at the dial's centre. Pure numpy and pycocotools: no bpy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .gauge import dial_world
+from .pinhole import project
+
+# a dial is visible when the surface at its centre's pixel is its own placement's and
+# lies within this distance of the dial's centre along the view (the gauge glass, the
+# bezel's depth)
+DIAL_DEPTH_TOLERANCE_M = 0.25
+
+
+def instance_ids(placements: list[dict]) -> dict[str, int]:
+    """A placement's instance id (its value in every mask): 1 + its rank among the
+    tags, so a tag has the same id in every frame and every run of a site."""
+    tags = sorted(p["tag"] for p in placements)
+    if len(tags) >= 65535:
+        raise ValueError(f"{len(tags)} placements do not fit a 16-bit mask")
+    return {t: i + 1 for i, t in enumerate(tags)}
+
+
+def categories(manifests: dict[str, dict]) -> list[dict]:
+    """COCO categories: the assets' categories, sorted, ids from 1 (terrain excluded:
+    ground is background, not an instance)."""
+    names = sorted({m.get("category") or m["asset"] for m in manifests.values() if m.get("category") != "terrain"})
+    return [{"id": i + 1, "name": n, "supercategory": "equipment"} for i, n in enumerate(names)]
+
+
+def annotations(ids: np.ndarray, tag_of: dict[int, str], category_of: dict[str, int]) -> list[dict]:
+    """One annotation per instance id present in `ids` (0 = background), in id order:
+    RLE of exactly its pixels, its tight box [x, y, w, h] and its pixel count."""
+    from pycocotools import mask as rle
+
+    out = []
+    present = np.unique(ids)
+    for iid in present[present > 0]:
+        binary = np.asfortranarray((ids == iid).astype(np.uint8))
+        code = rle.encode(binary)
+        rows, cols = np.nonzero(binary)
+        x0, y0 = int(cols.min()), int(rows.min())
+        tag = tag_of[int(iid)]
+        out.append({"instance_id": int(iid), "tag": tag, "category_id": category_of[tag],
+                    "segmentation": {"size": [int(v) for v in code["size"]], "counts": code["counts"].decode("ascii")},
+                    "area": int(rows.size), "bbox": [x0, y0, int(cols.max()) - x0 + 1, int(rows.max()) - y0 + 1],
+                    "iscrowd": 0})
+    return out
+
+
+def gauge_visibility(model_pose: np.ndarray, cam_pose: np.ndarray, k: dict, ids: np.ndarray,
+                     depth: np.ndarray, instance: int) -> dict:
+    """Is the dial of the placement at `model_pose` seen in this frame: its centre in
+    the frame, on a pixel of its own instance, at the dial's depth (not hidden behind
+    something of its own, such as the tank seen from behind)."""
+    centre, normal = dial_world(model_pose)
+    u, v = project(centre[None, :], cam_pose, k)[0]
+    facing = float(normal @ (cam_pose[:3, 3] - centre)) > 0.0
+    record = {"centre_px": None if np.isnan(u) else [float(u), float(v)], "visible": False}
+    if np.isnan(u) or not (0 <= u < k["width"] and 0 <= v < k["height"]):
+        return record
+    row, col = int(v), int(u)
+    expected = float(-(centre - cam_pose[:3, 3]) @ cam_pose[:3, 2])  # planar depth of the centre
+    record["visible"] = bool(facing and ids[row, col] == instance
+                             and abs(float(depth[row, col]) - expected) <= DIAL_DEPTH_TOLERANCE_M)
+    return record
