@@ -102,7 +102,7 @@ def read_blend_path(
     path = Path(path)
     open_untrusted(path)
     scene = Scene(driven=driven_objects(bindings))
-    scene.warnings.update(newer_file_warning(path))
+    scene.warnings.update(newer_file_warning())
     muted = mute_python_drivers()
     scene.warnings.update(rest_armatures())
     scene.warnings.update(animation_warning())

@@ -3,8 +3,6 @@ armatures (put in their rest pose here), actions, a file from a newer Blender.""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
 
@@ -49,7 +47,7 @@ def animation_warning() -> dict[str, str]:
                          f"file shows them at frame {bpy.context.scene.frame_current}, armatures at rest"}
 
 
-def newer_file_warning(path: Path) -> dict[str, str]:
+def newer_file_warning() -> dict[str, str]:
     """A warning when the file was saved by a newer Blender than the one reading it
     (its file version beyond bpy's): Blender reads it, but may drop what it does not know."""
     import bpy
