@@ -7,9 +7,9 @@ import base64
 import html
 import json
 import math
-import os
 from pathlib import Path
 
+from ..files import atomic_write
 from . import figures
 
 SCHEMA_ID = "substation-twin/bench/1"
@@ -28,14 +28,8 @@ def clean(obj):
     return obj
 
 
-def _atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 def write_json(doc: dict, path: Path) -> None:
-    _atomic(path, json.dumps(clean(doc), indent=1, sort_keys=True, allow_nan=False) + "\n")
+    atomic_write(path, json.dumps(clean(doc), indent=1, sort_keys=True, allow_nan=False) + "\n")
 
 
 def _fmt(v, unit: str = "") -> str:
@@ -119,4 +113,4 @@ def write_html(doc: dict, path: Path) -> None:
     parts.append("<h2>Section times</h2><table>")
     parts += [f"<tr><td>{e(k)}</td><td>{v['seconds']:.1f} s</td></tr>" for k, v in doc["sections"].items()]
     parts.append("</table><p>Raw figures: bench.json beside this page.</p></body></html>")
-    _atomic(path, "\n".join(parts))
+    atomic_write(path, "\n".join(parts))

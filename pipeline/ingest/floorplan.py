@@ -440,8 +440,9 @@ def read_floorplan_memo(path: Path, assets: set[str], levels: set[str], memo: Pa
     build folder may be shared, so nothing in it is unpickled."""
     import hashlib
     import json
-    import os
     from dataclasses import asdict
+
+    from ..files import atomic_write
 
     # one spelling of the path: the planner is handed a relative sources folder and the
     # scene tasks an absolute one, and each would otherwise miss the other's entry
@@ -461,10 +462,7 @@ def read_floorplan_memo(path: Path, assets: set[str], levels: set[str], memo: Pa
             pass
     fp = read_floorplan(path, known_assets=assets, levels=levels, options=options)
     if key is not None:
-        memo.parent.mkdir(parents=True, exist_ok=True)
-        tmp = memo.with_name(f"{memo.name}.tmp-{os.getpid()}")
-        tmp.write_text(json.dumps({"key": key, "floorplan": _floorplan_to_json(fp)}, sort_keys=True))
-        os.replace(tmp, memo)
+        atomic_write(memo, json.dumps({"key": key, "floorplan": _floorplan_to_json(fp)}, sort_keys=True))
     return fp
 
 

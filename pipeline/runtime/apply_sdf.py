@@ -19,7 +19,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +26,7 @@ from lxml import etree
 
 from .. import ir
 from ..export import names, sdf
+from ..files import atomic_write
 from ..geometry.transform import matrix_to_xyz_rpy
 from . import nodes, sun as sunmod
 
@@ -99,13 +99,6 @@ def _config(name: str, asset: str) -> bytes:
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
 
 
-def _atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-
-
 def write(run, out_dir: Path, quantum: float = 0.1) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -113,7 +106,7 @@ def write(run, out_dir: Path, quantum: float = 0.1) -> dict:
     if run.sun is not None:
         lines = [json.dumps({"k": k, "t": float(_f(t)), **sun_fragment(*s)}, sort_keys=True)
                  for k, (t, s) in enumerate(zip(run.times, run.sun))]
-        _atomic(out_dir / "sun.jsonl", ("\n".join(lines) + "\n").encode())
+        atomic_write(out_dir / "sun.jsonl", ("\n".join(lines) + "\n").encode())
         summary["files"].append(str(out_dir / "sun.jsonl"))
     table = [dict() for _ in run.times]
     built: set[str] = set()
@@ -141,14 +134,14 @@ def write(run, out_dir: Path, quantum: float = 0.1) -> dict:
                 except (KeyError, etree.XMLSyntaxError) as e:
                     summary["not_applied"].append(f"{ob.tag}: cannot edit {src}: {e}")
                     break
-                _atomic(out_dir / "models" / name / "model.sdf", data)
-                _atomic(out_dir / "models" / name / "model.config", _config(name, ob.asset))
+                atomic_write(out_dir / "models" / name / "model.sdf", data)
+                atomic_write(out_dir / "models" / name / "model.config", _config(name, ob.asset))
                 built.add(name)
                 summary["variants"].append({"name": name, "asset": ob.asset, "state": q})
             table[k][ob.tag] = f"model://{name}"
     lines = [json.dumps({"k": k, "t": float(_f(t)), "placements": table[k]}, sort_keys=True)
              for k, t in enumerate(run.times)]
-    _atomic(out_dir / "variants.jsonl", ("\n".join(lines) + "\n").encode())
+    atomic_write(out_dir / "variants.jsonl", ("\n".join(lines) + "\n").encode())
     summary["files"].append(str(out_dir / "variants.jsonl"))
     summary["variant_count"] = len(built)
     return summary

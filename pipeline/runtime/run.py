@@ -18,6 +18,7 @@ from pathlib import Path
 from .. import config
 from ..errors import UserError
 from ..export import manifest as manifest_io
+from ..files import atomic_write
 from . import graph, nodes
 
 
@@ -110,9 +111,7 @@ def _num(v):
 def write_states(records: list[dict], path: Path) -> None:
     lines = [json.dumps({**r, "t": _num(r["t"]), "outputs": {k: _num(v) for k, v in r["outputs"].items()}},
                         sort_keys=True, separators=(",", ":")) for r in records]
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text("\n".join(lines) + "\n")
-    tmp.replace(path)
+    atomic_write(path, "\n".join(lines) + "\n")
 
 
 def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = None, *,

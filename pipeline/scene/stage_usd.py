@@ -9,13 +9,12 @@ written relative to the scene file's final place, build/scene/.
 
 from __future__ import annotations
 
-import os
-import uuid
 from pathlib import Path
 
 import numpy as np
 
 from ..export.names import safe_name, usd_file
+from ..files import atomic_path
 from .placements import Placed
 
 MODELS_FROM_SCENE = "../models"  # build/scene/ -> build/models/
@@ -98,6 +97,5 @@ def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, pla
     _attr(light, "xformOp:orient", Sdf.ValueTypeNames.Quatd, sun_orientation(sun["elevation_deg"], sun["azimuth_deg"]))
     _attr(light, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(["xformOp:orient"]), uniform=True)
 
-    tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.usda")
-    layer.Export(str(tmp))
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:  # its temporary name keeps .usda: Export's format
+        layer.Export(str(tmp))

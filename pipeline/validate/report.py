@@ -18,13 +18,13 @@ import os
 import re
 import tempfile
 import time
-import uuid
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from lxml import etree
 
 from ..errors import UserError
+from ..files import atomic_write
 from ..findings import RULES, Finding
 from . import external, gazebo
 from .checks import check_package
@@ -318,16 +318,6 @@ def _summary(assets: list[dict], scene: dict) -> dict:
 # --- writers --------------------------------------------------------------------------
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    """Temp name, then rename: a killed run never leaves half a report."""
-    tmp = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:8]}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def to_json(report: dict) -> bytes:
     return (json.dumps(report, sort_keys=True, indent=1, allow_nan=False) + "\n").encode()
 
@@ -484,9 +474,9 @@ def validate_build(sources: Path, out: Path) -> dict:
     report, timings = build_report(Path(sources), Path(out))
     reports = Path(out) / "reports"
     reports.mkdir(parents=True, exist_ok=True)
-    _write_atomic(reports / "validation.json", to_json(report))
-    _write_atomic(reports / "validation.html", to_html(report))
-    _write_atomic(reports / "junit.xml", to_junit(report))
-    _write_atomic(reports / "timings.json", (json.dumps(timings, sort_keys=True, indent=1) + "\n").encode())
+    atomic_write(reports / "validation.json", to_json(report))
+    atomic_write(reports / "validation.html", to_html(report))
+    atomic_write(reports / "junit.xml", to_junit(report))
+    atomic_write(reports / "timings.json", (json.dumps(timings, sort_keys=True, indent=1) + "\n").encode())
     s = report["summary"]
     return {"errors": s["errors"], "warnings": s["warnings"], "skipped": s["skipped"]}
