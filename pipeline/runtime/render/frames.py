@@ -15,7 +15,7 @@ import numpy as np
 from .cycles import CyclesScene
 from .gauge import POINTER, gauge_box, pointer_angle
 from .pinhole import cull, intrinsics
-from .sensor import PhoneCamera, develop, metered_gain, metered_white_balance, veil_radiance
+from .sensor import PhoneCamera, develop, frame_seed, lens_glare, metered_gain, metered_white_balance
 from .site import Shot, Site
 
 def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, pointer_binding: dict | None) -> dict:
@@ -134,11 +134,11 @@ def develop_shot(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCame
         gain, wb = metered_gain(linear, cam), metered_white_balance(linear, cam)
     else:
         gain, wb = lock[0], np.asarray(lock[1], float)
-    view_axis = -shot.cam_pose[:3, 2]
+    k = intrinsics(shot.lens.hfov, linear.shape[1], linear.shape[0])
     visible = shot.sun_elevation > 0 and bl.sun_visible(shot.cam_pose[:3, 3], shot.sun_dir)
-    veil = veil_radiance(shot.sun_dir, view_axis, shot.dni, visible, cam)
-    rgb = develop(linear, gain, veil, wb, cam)
-    return rgb, gain, wb, veil
+    veil = lens_glare(linear, gain, wb, shot.cam_pose, k, shot.sun_dir, shot.dni if visible else 0.0, cam)
+    rgb = develop(linear, gain, veil, wb, cam, seed=seed)
+    return rgb, gain, wb, float(veil.mean())
 
 
 def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
@@ -149,7 +149,7 @@ def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: 
     t0 = time.perf_counter()
     linear = bl.render()
     seconds = time.perf_counter() - t0
-    rgb, gain, wb, veil = develop_shot(bl, shot, linear, cam, lock)
+    rgb, gain, wb, veil = develop_shot(bl, shot, linear, cam, lock, frame_seed(bl.scene.cycles.seed, name))
     labels = frame_labels(shot, k, site, gain, veil, binding)
     labels["pointer_rows_px"] = bl.pointer_rows(shot.target, shot.cam_pose, k)
     labels["camera"]["white_balance"] = [float(v) for v in wb]

@@ -10,8 +10,9 @@
   frame's side towards it more than the far side (sun_glare, scene_glare).
 - wb: grey-world auto white balance, metered with the exposure.
 - gain: exposure locked once per scene (a condition, or a scenario) by centre-weighted
-  metering of a first render to a mean of 0.18, clamped to the phone's longest exposure
-  at its highest ISO (GAIN_MAX), so night stays dark instead of being lifted to grey.
+  metering of a first render to the metering target, clamped to the phone's longest
+  exposure at its highest ISO (gain_max), so night stays dark instead of being lifted to
+  grey.
   Metering sees the render without the lens's glare: a locked exposure does not react to
   it, which is what washes a crop out in low sun.
 - noise: photon shot noise (Poisson in electrons) and read noise (Gaussian), from a
@@ -145,7 +146,8 @@ def halo_psf(theta: np.ndarray, cam: PhoneCamera) -> np.ndarray:
 def _rays(u: np.ndarray, v: np.ndarray, k: dict) -> np.ndarray:
     """(..., 3) unit rays in camera axes (x right, y up, looking down -z) through pixel
     positions (u right, v down)."""
-    d = np.stack([(u - k["cx"]) / k["fx"], -(v - k["cy"]) / k["fy"], -np.ones(np.shape(u))], axis=-1)
+    u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
+    d = np.stack([(u - k["cx"]) / k["fx"], -(v - k["cy"]) / k["fy"], -np.ones(u.shape)], axis=-1)
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
@@ -163,17 +165,30 @@ def _kernel(cu: float, cv: float, dy: np.ndarray, dx: np.ndarray, k: dict, cam: 
     return halo_psf(_angle(there, here), cam)
 
 
-def scene_glare(linear_rgb: np.ndarray, k: dict, cam: PhoneCamera) -> np.ndarray:
-    """(h, w, 3) radiance the lens moves within the frame: every pixel's halo spread
-    over the frame (FFT convolution) minus the share the halo takes from its core."""
+def scene_glare(linear_rgb: np.ndarray, gain: float, wb, k: dict, cam: PhoneCamera) -> np.ndarray:
+    """(h, w, 3) radiance that the halo of the frame's over-bright light adds: what lies
+    above the sensor's clip at this exposure (a glint of the sun on glass, a floodlight)
+    spread over the frame by FFT convolution. The halo of in-range light is a fog of a
+    few per cent that the exposure absorbs, and the frame cannot see the surroundings
+    that would add to it at its edges: it is left out."""
     from scipy.signal import fftconvolve
 
-    h, w = linear_rgb.shape[:2]
+    lin = np.asarray(linear_rgb, np.float64)
+    clip = 1.0 / (gain * np.asarray(wb, np.float64))
+    excess = np.maximum(lin - clip, 0.0)
+    if not excess.any():
+        return np.zeros_like(lin)
+    h, w = lin.shape[:2]
     kernel = _kernel(k["cx"], k["cy"], np.arange(-(h - 1), h, dtype=float), np.arange(-(w - 1), w, dtype=float),
                      k, cam) / (k["fx"] * k["fy"])  # per pixel: 1/sr times a pixel's solid angle
-    lin = np.asarray(linear_rgb, np.float64)
-    halo = fftconvolve(lin, kernel[..., None], mode="same", axes=(0, 1))
-    return halo - cam.glare_fraction * lin
+    return np.maximum(fftconvolve(excess, kernel[..., None], mode="same", axes=(0, 1)), 0.0)
+
+
+def lens_glare(linear_rgb: np.ndarray, gain: float, wb, pose: np.ndarray, k: dict, sun_dir: np.ndarray, dni: float,
+               cam: PhoneCamera) -> np.ndarray:
+    """(h, w, 3) radiance the lens adds to a frame: the sun's disc and halo (dni 0 when
+    the sun is set or occluded) and the halo of the frame's over-bright light."""
+    return sun_glare(sun_dir, dni, pose, k, cam)[..., None] + scene_glare(linear_rgb, gain, wb, k, cam)
 
 
 def _disc_weights(u: float, v: float, radius: float, half: int, oversample: int = 8) -> np.ndarray:
@@ -216,7 +231,7 @@ def sun_glare(sun_dir: np.ndarray, dni: float, pose: np.ndarray, k: dict, cam: P
     dx = np.arange(-(iu + half), w - iu + half, dtype=float)
     dy = np.arange(-(iv + half), h - iv + half, dtype=float)
     halo = fftconvolve(_kernel(*centre, dy, dx, k, cam), weights, mode="valid")
-    out += dni * cos_axis * halo
+    out += dni * cos_axis * np.maximum(halo, 0.0)
     # The disc itself, where the patch overlaps the frame: the core's share of its energy.
     core = (1.0 - cam.glare_fraction) * dni * weights * (k["fx"] * k["fy"])
     r0, c0 = iv - half, iu - half
