@@ -33,6 +33,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..digest import sha256_file
+from ..files import atomic_path, atomic_write
 
 CACHE_FOLDER = ".cache"  # in the build folder, unless a build is given another (--cache)
 USERS_FILE = ".users"  # locked shared by every build using the cache
@@ -101,10 +102,8 @@ class Cache:
             dest = Path(build) / rel
             if dest.is_file() and dest.stat().st_size == (src_root / rel).stat().st_size and sha256_file(dest) == digest:
                 continue
-            dest.parent.mkdir(parents=True, exist_ok=True)
-            tmp = dest.with_name(f".{dest.name}.tmp-{uuid.uuid4().hex[:8]}")
-            shutil.copyfile(src_root / rel, tmp)
-            os.replace(tmp, dest)
+            with atomic_path(dest) as tmp:
+                shutil.copyfile(src_root / rel, tmp)
         return meta
 
     @contextmanager
@@ -193,7 +192,7 @@ class Cache:
             pass
 
     def clean_tmp(self) -> None:
-        """Remove leftovers of killed builds (never complete entries; memo files too)."""
+        """Remove the temporary entries killed builds left (never complete ones)."""
         if self.root.is_dir():
             for p in self.root.glob(".tmp-*"):
                 if p.is_dir():
@@ -231,13 +230,10 @@ def _read_usage(root: Path) -> int | None:
 
 
 def _write_usage(root: Path, nbytes: int) -> None:
-    path = Path(root) / USAGE_FILE
-    tmp = path.with_name(f".tmp-{uuid.uuid4().hex}")
     try:
-        tmp.write_bytes(str(int(nbytes)).zfill(_USAGE_DIGITS).encode())
-        os.replace(tmp, path)
+        atomic_write(Path(root) / USAGE_FILE, str(int(nbytes)).zfill(_USAGE_DIGITS), parents=False)
     except OSError:
-        tmp.unlink(missing_ok=True)
+        pass  # the next prune walks again
 
 
 def _scan(path) -> list[os.DirEntry]:

@@ -6,8 +6,9 @@ are the same with an empty memo, a full one or none.
 
 Entries live under the hash of the step's key and the code version the caller names
 (its namespace), so new code never reads an old entry. Each is made under a
-temporary name in the cache's root (which `Cache.clean_tmp` sweeps) and renamed into
-place: a killed build leaves whole entries or none.
+temporary name beside its place and renamed into it (files.atomic_path): a killed
+build leaves whole entries or none, and a temporary it left is a memo file like any
+other to the cache's prune.
 
 - ArrayMemo: plain arrays (numbers, booleans, fixed-width text) in a file of their
   own layout (below), read without pickles. An entry that cannot be read is a miss,
@@ -20,12 +21,12 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import uuid
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from ..files import atomic_path
 from .cache import MEMO_FOLDER, add_usage
 
 
@@ -45,21 +46,16 @@ class _Memo:
         return self.root / MEMO_FOLDER / name[:2] / f"{name}{self.suffix}"
 
     def _place(self, final: Path, make: Callable[[Path], None]) -> None:
-        """final <- what `make(tmp)` makes at a temporary name in the cache's root;
-        nothing when the cache cannot be written (read-only, full, another
-        filesystem, a file in its place): the memo only spares work."""
-        tmp = self.root / f".tmp-{uuid.uuid4().hex}{self.suffix}"
+        """final <- what `make(tmp)` makes at a temporary name beside it; nothing
+        when the cache cannot be written (read-only, full, another filesystem, a
+        file in its place): the memo only spares work."""
         try:
-            final.parent.mkdir(parents=True, exist_ok=True)
-            make(tmp)
-            size = tmp.stat().st_size
-            os.replace(tmp, final)
+            with atomic_path(final) as tmp:
+                make(tmp)
+                size = tmp.stat().st_size
             add_usage(self.root, size)
         except OSError:
-            try:
-                tmp.unlink(missing_ok=True)
-            except OSError:
-                pass
+            pass
 
 
 class ArrayMemo(_Memo):

@@ -24,13 +24,13 @@ import json
 import os
 import shutil
 import sys
-import uuid
 from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Future, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import UserError
+from ..files import atomic_write
 from .cache import DEFAULT_LIMIT, Cache, cache_root
 from .executors import ExecutorFactory, Workers, default_memory, local_pool, run_task, warm_up
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
@@ -105,10 +105,7 @@ class Scheduler:
             return {"tasks": {}, "hashes": {}}
 
     def _save_state(self, state: dict) -> None:
-        path = self.build / STATE_FILE
-        tmp = path.with_name(f"{STATE_FILE}.tmp-{uuid.uuid4().hex[:8]}")
-        tmp.write_text(json.dumps(state, sort_keys=True, indent=1))
-        os.replace(tmp, path)
+        atomic_write(self.build / STATE_FILE, json.dumps(state, sort_keys=True, indent=1))
 
     def _fresh(self, previous: dict | None, key: str) -> bool:
         """Whether the last build ran this key and its outputs are still in place."""
