@@ -180,7 +180,7 @@ class Georeferencer:
         d = self.to_enu(p + step, h) - self.to_enu(p - step, h)
         # libm's atan2 per point: numpy 1.26's arctan2 on strided columns rounds its
         # first call in a process differently from later ones (SVML vs libm), so the
-        # same build gave different yaw bits depending on what a worker ran before
+        # yaw's bits would depend on what a worker ran before
         return np.array([math.atan2(y, x) for x, y in zip(d[:, 0].tolist(), d[:, 1].tolist())], dtype=np.float64)
 
     def naive_enu(self, xy, h) -> np.ndarray:
