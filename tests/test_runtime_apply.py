@@ -174,11 +174,11 @@ def test_usd_layer_passes_usd_validation(result):
 
 
 def test_animated_glb_passes_the_gltf_validator(result):
-    from pipeline.runtime.apply_gltf import read_glb
+    from pipeline import glb
 
     _, out, summary = result
     (path,) = summary["appliers"]["gltf"]["files"]
-    doc, _ = read_glb(Path(path).read_bytes())
+    doc, _ = glb.read(path)
     (anim,) = doc["animations"]
     assert sorted(c["target"]["path"] for c in anim["channels"]) == ["rotation", "weights"]
     sel = anim["extras"]["KHR_materials_variants_selection"]

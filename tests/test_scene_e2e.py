@@ -100,9 +100,10 @@ def gltf_poses(glb: Path) -> dict[str, tuple[np.ndarray, float]]:
     """Instance transforms of each asset's first visual node, back to Z-up ENU. The
     instance matrix is placement pose x the visual's model pose, so compare the root
     visual by removing its model-frame pose, read from the model's own glb."""
-    from pipeline.scene import scene_gltf
+    from pipeline import glb as container
+    from pipeline.geometry.transform import matrix_from_quaternion
 
-    doc, binary = scene_gltf.read_glb(glb)
+    doc, binary = container.read(glb)
     out = {}
     for node in doc["nodes"]:
         inst = node.get("extensions", {}).get("EXT_mesh_gpu_instancing")
@@ -112,13 +113,13 @@ def gltf_poses(glb: Path) -> dict[str, tuple[np.ndarray, float]]:
         visual = node["name"].split("/")[2]
         t = _acc(doc, binary, inst["attributes"]["TRANSLATION"])
         q = _acc(doc, binary, inst["attributes"]["ROTATION"])
-        model_doc, _ = scene_gltf.read_glb(glb.parent.parent / "models" / asset / f"{asset}.glb")
-        local = dict((model_doc["nodes"][i]["name"], m) for i, m in scene_gltf.visual_nodes(model_doc))[visual]
+        model_doc, _ = container.read(glb.parent.parent / "models" / asset / f"{asset}.glb")
+        local = dict((model_doc["nodes"][i]["name"], m) for i, m in container.visual_nodes(model_doc))[visual]
         for tag, ti, qi in zip(node["extras"]["tags"], t, q):
-            inst_m = scene_gltf.quat_to_matrix(qi)
+            inst_m = matrix_from_quaternion(container.from_gltf_rotation(qi))
             inst_m[:3, 3] = ti
             placement_y = inst_m @ np.linalg.inv(local)
-            pz = scene_gltf.Z_TO_Y.T @ placement_y @ scene_gltf.Z_TO_Y
+            pz = container.to_z_up(placement_y)
             out.setdefault(tag, (pz[:3, 3], math.degrees(math.atan2(pz[1, 0], pz[0, 0]))))
     return out
 

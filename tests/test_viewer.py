@@ -23,8 +23,9 @@ import pytest
 
 import mini_sources
 from pipeline import config
-from pipeline.scene.scene_gltf import Z_TO_Y, quat_to_matrix, read_glb
-from pipeline.viewer import check, libs, packs, sun_table, tiles
+from pipeline import glb
+from pipeline.geometry.transform import matrix_from_quaternion
+from pipeline.viewer import check, libs, sun_table, tiles
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -126,7 +127,7 @@ def _tiles(node, depth=0):
 
 def _drawn_points(path: Path) -> tuple[np.ndarray, list[str]]:
     """ENU points a tile content draws (every instance of every mesh) and its tags."""
-    doc, binary = read_glb(path)
+    doc, binary = glb.read(path)
     ext = path.parent
 
     def buffer(i):
@@ -138,7 +139,7 @@ def _drawn_points(path: Path) -> tuple[np.ndarray, list[str]]:
         view = doc["bufferViews"][a["bufferView"]]
         data = buffer(view["buffer"])
         sub = dict(doc, bufferViews=[{**view, "buffer": 0}], accessors=[{**a, "bufferView": 0}])
-        return packs.accessor(sub, data, 0)
+        return glb.accessor(sub, data, 0)
 
     points, tags = [], []
     (root,) = doc["scenes"][0]["nodes"]
@@ -151,8 +152,8 @@ def _drawn_points(path: Path) -> tuple[np.ndarray, list[str]]:
         for prim in doc["meshes"][node["mesh"]]["primitives"]:
             pos = acc(prim["attributes"]["POSITION"]).astype(np.float64)
             for k in range(len(t)):
-                m = quat_to_matrix(r[k])[:3, :3] * s[k]
-                points.append((pos @ m.T + t[k] + centre) @ Z_TO_Y[:3, :3])  # Y up -> ENU
+                m = matrix_from_quaternion(glb.from_gltf_rotation(r[k]))[:3, :3] * s[k]
+                points.append(glb.points_to_z_up(pos @ m.T + t[k] + centre))  # ENU
     return np.concatenate(points), tags
 
 
@@ -239,7 +240,7 @@ def test_tile_contents_pass_the_gltf_validator_and_share_their_meshes(mini, tile
     assert meshes == sorted(f"{a}.lod{k}.bin" for a in ("kiosk", "pole") for k in range(len(tiles.levels_of(
         json.loads((out / "models" / a / "manifest.json").read_text())))))
     for f in files[:-1]:
-        doc, _ = read_glb(f)
+        doc, _ = glb.read(f)
         assert "EXT_mesh_gpu_instancing" in doc["extensionsUsed"]
         assert all(b.get("uri", "").startswith("../meshes/") for b in doc["buffers"][1:])
 

@@ -13,32 +13,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ..scene.scene_gltf import node_matrix, read_glb
-
-_DTYPES = {5126: np.float32, 5125: np.uint32, 5123: np.uint16, 5121: np.uint8}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
-
-
-def accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
-    acc = doc["accessors"][index]
-    view = doc["bufferViews"][acc["bufferView"]]
-    dtype = np.dtype(_DTYPES[acc["componentType"]])
-    width = _WIDTH[acc["type"]]
-    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    stride = view.get("byteStride") or dtype.itemsize * width
-    count = acc["count"]
-    raw = np.frombuffer(binary, dtype=np.uint8, count=(count - 1) * stride + dtype.itemsize * width, offset=start)
-    rows = np.lib.stride_tricks.as_strided(raw, shape=(count, dtype.itemsize * width), strides=(stride, 1))
-    return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+from .. import glb
 
 
 def _mesh_triangles(doc: dict, binary: bytes, mesh: int, matrix: np.ndarray):
     for prim in doc["meshes"][mesh]["primitives"]:
         if prim.get("mode", 4) != 4 or "POSITION" not in prim["attributes"]:
             continue
-        pos = accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+        pos = glb.accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
         if "indices" in prim:
-            idx = accessor(doc, binary, prim["indices"]).reshape(-1, 3).astype(np.int64)
+            idx = glb.accessor(doc, binary, prim["indices"]).reshape(-1, 3).astype(np.int64)
         else:
             idx = np.arange(len(pos), dtype=np.int64).reshape(-1, 3)
         yield pos @ matrix[:3, :3].T + matrix[:3, 3], idx
@@ -47,14 +31,14 @@ def _mesh_triangles(doc: dict, binary: bytes, mesh: int, matrix: np.ndarray):
 def triangles(path: Path, lod: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """vertices (n, 3) float64 and faces (m, 3) int64 of every mesh node of the default
     scene, in the scene frame. Instancing extensions are ignored (model files only)."""
-    doc, binary = read_glb(Path(path))
+    doc, binary = glb.read(path)
     verts, faces, offset = [], [], 0
     scene = doc["scenes"][doc.get("scene", 0)]
 
     def walk(i: int, parent: np.ndarray):
         nonlocal offset
         node = doc["nodes"][i]
-        m = parent @ node_matrix(node)
+        m = parent @ glb.node_matrix(node)
         mesh = node.get("mesh")
         ids = node.get("extensions", {}).get("MSFT_lod", {}).get("ids", [])
         if lod > 0 and ids:
@@ -76,5 +60,5 @@ def triangles(path: Path, lod: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 def lod_count(path: Path) -> int:
     """1 + the longest MSFT_lod list of the file's nodes."""
-    doc, _ = read_glb(Path(path))
+    doc, _ = glb.read(path)
     return 1 + max((len(n.get("extensions", {}).get("MSFT_lod", {}).get("ids", [])) for n in doc["nodes"]), default=0)

@@ -42,19 +42,19 @@ from .source_task import build_source
 from .viewer_task import viewer_tasks
 
 SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
-               "pipeline.ingest.mesh", "pipeline.ingest.units", "pipeline.ingest.gltf_file",
+               "pipeline.ingest.mesh", "pipeline.ingest.units", "pipeline.ingest.gltf_file", "pipeline.glb",
                "pipeline.ingest.tessellate", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.findings",
                "pipeline.geometry.edges", "pipeline.fork_join",
                "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.source_task")
 GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.findings", "pipeline.fork_join",
                  "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.geometry_task")
-PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.digest", "pipeline.validate.checks",
-                "pipeline.findings", "pipeline.geometry.edges", "pipeline.builder.irfile", "pipeline.builder.layout",
-                "pipeline.builder.package_task")
+PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.glb", "pipeline.digest",
+                "pipeline.validate.checks", "pipeline.findings", "pipeline.geometry.edges", "pipeline.builder.irfile",
+                "pipeline.builder.layout", "pipeline.builder.package_task")
 # what the per-mesh checks' memo entries depend on (findings.mesh_findings)
 CHECKS_CODE = ("pipeline.findings", "pipeline.geometry.edges", "pipeline.ir", "pipeline.digest")
 SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
-              "pipeline.scene", "pipeline.export", "pipeline.digest", "pipeline.geometry.transform",
+              "pipeline.scene", "pipeline.export", "pipeline.glb", "pipeline.digest", "pipeline.geometry.transform",
               "pipeline.findings", "pipeline.geometry.edges")
 # what build_scene imports (inside functions): an idle worker imports them ahead
 SCENE_WARM = ("pipeline.scene.assemble", "pipeline.scene.scene_gltf", "pipeline.scene.stage_usd",

@@ -22,8 +22,9 @@ from .graph import Task, code_version
 VIEWER_CODE = ("pipeline.viewer.page", "pipeline.viewer.sun_table", "pipeline.viewer.tiles", "pipeline.viewer.packs",
                "pipeline.runtime.sun", "pipeline.runtime.graph", "pipeline.runtime.nodes", "pipeline.config",
                "pipeline.georef", "pipeline.scene.placements", "pipeline.builder.viewer_task")
-TILES_CODE = ("pipeline.viewer.tiles", "pipeline.viewer.packs", "pipeline.scene.scene_gltf", "pipeline.scene.placements",
-              "pipeline.export.names", "pipeline.georef", "pipeline.config", "pipeline.builder.viewer_task")
+TILES_CODE = ("pipeline.viewer.tiles", "pipeline.viewer.packs", "pipeline.glb", "pipeline.scene.scene_gltf",
+              "pipeline.geometry.transform", "pipeline.scene.placements", "pipeline.export.names", "pipeline.georef",
+              "pipeline.config", "pipeline.builder.viewer_task")
 LIBS_CODE = ("pipeline.viewer.libs", "pipeline.builder.viewer_task")
 SUN_CODE = ("pipeline.viewer.sun_table", "pipeline.runtime.sun")  # what the kept sun tables depend on
 

@@ -1,10 +1,11 @@
 """glTF 2.0 binary writer: one `<id>.glb` per package (DESIGN.md s.4), numpy + json +
 struct only.
 
-The IR is Z up, glTF is Y up (+Z forward): the change of basis C, (x, y, z) ->
-(x, z, -y), happens here and only here. Vertex data is multiplied by C and every
-local transform T becomes C T C^-1, so the composed world transform is C times the
-IR's and the root node carries no correction of its own.
+The IR is Z up, glTF is Y up (+Z forward): the change of basis C = pipeline.glb.Z_TO_Y,
+(x, y, z) -> (x, z, -y), is applied as the model is written. Vertex data is multiplied
+by C and every local transform T becomes C T C^-1, so the composed world transform is
+C times the IR's and the root node carries no correction of its own. The GLB bytes
+themselves are laid out by pipeline.glb.
 
 Node layout (the runtime targets it by name):
 
@@ -23,40 +24,22 @@ KHR_materials_variants named `<variable>:<material>`; shape keys become morph ta
 
 from __future__ import annotations
 
-import json
-import os
-import struct
 from pathlib import Path
 
 import numpy as np
 
-from pipeline import ir
+from pipeline import glb, ir
 from pipeline.errors import UserError
 from pipeline.export import names
 from pipeline.geometry.metrics import stored_normals
 from pipeline.geometry.transform import decompose, quaternion_from_matrix
 
-# Z up -> Y up: (x, y, z) -> (x, z, -y). A proper rotation, so winding is unchanged.
-_C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-_C4 = np.eye(4)
-_C4[:3, :3] = _C
-
-_FLOAT, _USHORT, _UINT = 5126, 5123, 5125
-_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
-_GLB_MAGIC, _JSON_CHUNK, _BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
-
 
 def write(asset: ir.Asset, folder: Path) -> list[str]:
-    """Write `<id>.glb` into `folder`; return the package-relative paths written.
-
-    Written under a temporary name and renamed into place (no half-written file)."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    data = _glb_bytes(asset)
+    """Write `<id>.glb` into `folder` (atomically); return the package-relative paths
+    written."""
     rel = names.gltf_file(asset.id)
-    tmp = folder / f".{rel}.tmp"
-    tmp.write_bytes(data)
-    os.replace(tmp, folder / rel)
+    glb.write(Path(folder) / rel, *_document(asset))
     return [rel]
 
 
@@ -67,9 +50,7 @@ class _Doc:
         self.json: dict = {"asset": {"version": "2.0", "generator": "substation-twin"}}
         self.nodes: list[dict] = []
         self.meshes: list[dict] = []
-        self.accessors: list[dict] = []
-        self.views: list[dict] = []
-        self.blob = bytearray()
+        self.buffer = glb.Buffer()
         self.extensions: set[str] = set()
         self.images: list[dict] = []
         self.textures: list[dict] = []
@@ -79,10 +60,8 @@ class _Doc:
         """The texture's index; its image embedded once in the buffer however many
         materials sample it."""
         if texture.name not in self.texture_index:
-            self.blob += b"\0" * (-len(self.blob) % 4)
-            self.views.append({"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(texture.data)})
-            self.blob += texture.data
-            self.images.append({"bufferView": len(self.views) - 1, "mimeType": texture.mime, "name": texture.name})
+            view = self.buffer.add_view(texture.data)
+            self.images.append({"bufferView": view, "mimeType": texture.mime, "name": texture.name})
             # one sampler for all: trilinear, repeat (glTF's defaults spelled out)
             self.textures.append({"sampler": 0, "source": len(self.images) - 1})
             self.texture_index[texture.name] = len(self.textures) - 1
@@ -93,26 +72,12 @@ class _Doc:
         return len(self.nodes) - 1
 
     def add_accessor(self, array: np.ndarray, kind: str, target: int | None, bounds: bool = False) -> int:
-        """One tightly packed bufferView + accessor per array, each view 4-byte aligned."""
-        array = np.ascontiguousarray(array)
-        component = {np.dtype(np.float32): _FLOAT, np.dtype(np.uint16): _USHORT, np.dtype(np.uint32): _UINT}[array.dtype]
-        self.blob += b"\0" * (-len(self.blob) % 4)
-        view = {"buffer": 0, "byteOffset": len(self.blob), "byteLength": array.nbytes}
-        if target is not None:
-            view["target"] = target
-        self.views.append(view)
-        self.blob += array.astype(array.dtype.newbyteorder("<"), copy=False).tobytes()
-        acc = {"bufferView": len(self.views) - 1, "componentType": component,
-               "count": int(len(array)), "type": kind}
-        if bounds:
-            # Bounds of the float32 values actually stored, as the validator recomputes them.
-            acc["min"] = [float(c) for c in array.min(axis=0)]
-            acc["max"] = [float(c) for c in array.max(axis=0)]
-        self.accessors.append(acc)
-        return len(self.accessors) - 1
+        """One tightly packed bufferView + accessor per array."""
+        return self.buffer.add_accessor(array, kind, target, bounds)
 
 
-def _glb_bytes(asset: ir.Asset) -> bytes:
+def _document(asset: ir.Asset) -> tuple[dict, bytes]:
+    """The model's glTF document and its binary buffer."""
     doc = _Doc()
     where = asset.source or asset.id
     material_index = {m.name: i for i, m in enumerate(asset.materials)}
@@ -126,7 +91,7 @@ def _glb_bytes(asset: ir.Asset) -> bytes:
     if variants:
         doc.json["extensions"] = {"KHR_materials_variants": {"variants": [{"name": n} for n in variants]}}
         doc.extensions.add("KHR_materials_variants")
-    for key, items in (("meshes", doc.meshes), ("accessors", doc.accessors), ("bufferViews", doc.views),
+    for key, items in (("meshes", doc.meshes), ("accessors", doc.buffer.accessors), ("bufferViews", doc.buffer.views),
                        ("images", doc.images), ("textures", doc.textures)):
         if items:
             doc.json[key] = items
@@ -134,36 +99,20 @@ def _glb_bytes(asset: ir.Asset) -> bytes:
         doc.json["samplers"] = [{"magFilter": 9729, "minFilter": 9987, "wrapS": 10497, "wrapT": 10497}]
     if not doc.json["materials"]:
         del doc.json["materials"]
-    if doc.blob:
-        doc.blob += b"\0" * (-len(doc.blob) % 4)
-        doc.json["buffers"] = [{"byteLength": len(doc.blob)}]
+    blob = bytes(doc.buffer.binary)
+    if blob:
+        doc.json["buffers"] = [{"byteLength": glb.padded_length(blob)}]
     if doc.extensions:
         doc.json["extensionsUsed"] = sorted(doc.extensions)
-    return _pack_glb(doc.json, bytes(doc.blob))
-
-
-def _pack_glb(gltf: dict, blob: bytes) -> bytes:
-    """GLB container: 12-byte header, JSON chunk padded with spaces, BIN chunk padded
-    with zeros. Sorted keys and compact separators make the bytes reproducible."""
-    text = json.dumps(gltf, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-    body = text.encode("utf-8")
-    body += b" " * (-len(body) % 4)
-    chunks = struct.pack("<II", len(body), _JSON_CHUNK) + body
-    if blob:
-        chunks += struct.pack("<II", len(blob), _BIN_CHUNK) + blob
-    return struct.pack("<III", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+    return doc.json, blob
 
 
 # ---------------------------------------------------------------- transforms
 
-def _to_y_up(m: np.ndarray) -> np.ndarray:
-    return _C4 @ np.asarray(m, dtype=np.float64) @ _C4.T
-
-
 def _set_transform(node: dict, m: np.ndarray) -> None:
     """TRS (animatable by the runtime) of a Z-up local transform, identity parts omitted.
     A matrix with shear cannot be split into TRS: it is written as `matrix`."""
-    m = _to_y_up(m)
+    m = glb.to_y_up(m)
     t, r, s = decompose(m)
     rebuilt = np.eye(4)
     rebuilt[:3, :3] = r @ np.diag(s)
@@ -173,9 +122,9 @@ def _set_transform(node: dict, m: np.ndarray) -> None:
         return
     if np.any(t != 0.0):
         node["translation"] = [float(c) for c in t]
-    w, x, y, z = quaternion_from_matrix(r)
-    if (x, y, z) != (0.0, 0.0, 0.0):
-        node["rotation"] = [float(x), float(y), float(z), float(w)]
+    q = quaternion_from_matrix(r)
+    if np.any(q[1:] != 0.0):
+        node["rotation"] = [float(c) for c in glb.to_gltf_rotation(q)]
     if np.any(np.abs(s - 1.0) > 1e-12):  # not the rounding noise of column norms
         node["scale"] = [float(c) for c in s]
 
@@ -218,14 +167,14 @@ def _joint_extras(joint: ir.Joint, child: ir.Link) -> dict:
     """The joint as the runtime needs it in glTF terms: axis and pivot in the child link
     node's (Y-up) frame, plus the IR axis in the joint frame for exactness."""
     to_child = np.linalg.inv(child.pose) @ joint.pose
-    axis = _C @ (to_child[:3, :3] @ joint.axis)
+    axis = glb.points_to_y_up(to_child[:3, :3] @ joint.axis)
     return {
         "name": joint.name,
         "type": joint.type,
         "parent": joint.parent,
         "axis": [float(c) for c in axis],
         "axis_ir": [float(c) for c in joint.axis],
-        "pivot": [float(c) for c in _C @ to_child[:3, 3]],
+        "pivot": [float(c) for c in glb.points_to_y_up(to_child[:3, 3])],
         "lower": None if joint.lower is None else float(joint.lower),
         "upper": None if joint.upper is None else float(joint.upper),
         "effort": None if joint.effort is None else float(joint.effort),
@@ -270,28 +219,28 @@ def _add_mesh(doc: _Doc, name: str, m: ir.Mesh, material: int, mappings: list[di
     cannot be empty)."""
     if len(m.faces) == 0 or len(m.vertices) == 0:
         return None
-    positions = (np.asarray(m.vertices, dtype=np.float64) @ _C.T).astype(np.float32)
+    positions = glb.points_to_y_up(m.vertices).astype(np.float32)
     normals = stored_normals(m.vertices, m.faces, m.normals)
-    normals = np.asarray(normals, dtype=np.float64) @ _C.T
+    normals = glb.points_to_y_up(normals)
     normals = (normals / np.linalg.norm(normals, axis=1, keepdims=True)).astype(np.float32)
     attributes = {
-        "POSITION": doc.add_accessor(positions, "VEC3", _ARRAY_BUFFER, bounds=True),
-        "NORMAL": doc.add_accessor(normals, "VEC3", _ARRAY_BUFFER),
+        "POSITION": doc.add_accessor(positions, "VEC3", glb.ARRAY_BUFFER, bounds=True),
+        "NORMAL": doc.add_accessor(normals, "VEC3", glb.ARRAY_BUFFER),
     }
     if m.uvs is not None:
         # glTF's texture origin is the top-left corner: v flips.
         uv = np.asarray(m.uvs, dtype=np.float64) * (1.0, -1.0) + (0.0, 1.0)
-        attributes["TEXCOORD_0"] = doc.add_accessor(uv.astype(np.float32), "VEC2", _ARRAY_BUFFER)
+        attributes["TEXCOORD_0"] = doc.add_accessor(uv.astype(np.float32), "VEC2", glb.ARRAY_BUFFER)
     # 0xFFFF is reserved (primitive restart), so 16-bit indices stop below it.
     index_type = np.uint16 if len(m.vertices) < 0xFFFF else np.uint32
     indices = np.asarray(m.faces, dtype=np.int64).reshape(-1).astype(index_type)
-    primitive = {"attributes": attributes, "indices": doc.add_accessor(indices, "SCALAR", _ELEMENT_ARRAY_BUFFER),
+    primitive = {"attributes": attributes, "indices": doc.add_accessor(indices, "SCALAR", glb.ELEMENT_ARRAY_BUFFER),
                  "material": material, "mode": 4}
     mesh: dict = {"name": name, "primitives": [primitive]}
     if m.shape_keys:
         primitive["targets"] = [
-            {"POSITION": doc.add_accessor(((k.vertices - m.vertices) @ _C.T).astype(np.float32), "VEC3",
-                                          _ARRAY_BUFFER, bounds=True)}
+            {"POSITION": doc.add_accessor(glb.points_to_y_up(k.vertices - m.vertices).astype(np.float32), "VEC3",
+                                          glb.ARRAY_BUFFER, bounds=True)}
             for k in m.shape_keys
         ]
         mesh["weights"] = [0.0] * len(m.shape_keys)

@@ -1,8 +1,14 @@
 """Pose helpers on 4x4 float64 homogeneous matrices.
 
 Conventions (DESIGN.md s.3): right-handed, radians, SDF roll-pitch-yaw meaning fixed
-axes X, then Y, then Z, i.e. R = Rz(yaw) @ Ry(pitch) @ Rx(roll). Quaternions are
-(w, x, y, z) with w >= 0. Pure numpy, no I/O.
+axes X, then Y, then Z, i.e. R = Rz(yaw) @ Ry(pitch) @ Rx(roll). Pure numpy, no I/O.
+
+Quaternions, everywhere in the pipeline: (w, x, y, z), the scalar w first, unit
+length, w >= 0 where one is made from a matrix (q and -q are the same rotation; the
+sign is fixed so equal rotations give equal numbers). The file formats' own orders are
+converted only where a file is written or read: glTF stores (x, y, z, w)
+(pipeline.glb.to_gltf_rotation / from_gltf_rotation), USD's Gf.Quat takes the real
+part first, as here.
 """
 
 from __future__ import annotations
@@ -85,44 +91,84 @@ def matrix_to_xyz_rpy(m) -> tuple[np.ndarray, np.ndarray]:
     return xyz, np.array([roll, pitch, yaw])
 
 
-def quaternion_from_matrix(m) -> np.ndarray:
-    """Unit quaternion (4,) = (w, x, y, z), w >= 0, of the rotation part of a (4, 4)/(3, 3).
+def quaternions_from_matrices(m) -> np.ndarray:
+    """(k, 4) unit quaternions (w, x, y, z), w >= 0, of the rotation parts of
+    m: (k, 4, 4) or (k, 3, 3).
 
-    Shepperd's method: choose the largest of 4w^2, 4x^2, 4y^2, 4z^2 as the pivot so the
-    square root and the division never work on a small number.
+    Shepperd's method: each matrix pivots on the largest of 4w^2, 4x^2, 4y^2, 4z^2
+    (trace, then the diagonal), so the square root and the division never work on a
+    small number, near 180 degrees included.
     """
-    r = np.asarray(m, dtype=np.float64)[:3, :3]
-    t = np.trace(r)
-    diag = (t, r[0, 0], r[1, 1], r[2, 2])
-    k = int(np.argmax(diag))
-    if k == 0:
-        s = 2.0 * math.sqrt(max(1.0 + t, 0.0))
-        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-    elif k == 1:
-        s = 2.0 * math.sqrt(max(1.0 + r[0, 0] - r[1, 1] - r[2, 2], 0.0))
-        q = [(r[2, 1] - r[1, 2]) / s, 0.25 * s, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s]
-    elif k == 2:
-        s = 2.0 * math.sqrt(max(1.0 - r[0, 0] + r[1, 1] - r[2, 2], 0.0))
-        q = [(r[0, 2] - r[2, 0]) / s, (r[0, 1] + r[1, 0]) / s, 0.25 * s, (r[1, 2] + r[2, 1]) / s]
-    else:
-        s = 2.0 * math.sqrt(max(1.0 - r[0, 0] - r[1, 1] + r[2, 2], 0.0))
-        q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0 else q
+    r = np.asarray(m, dtype=np.float64)[..., :3, :3].reshape(-1, 3, 3)
+    d0, d1, d2 = r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]
+    t = d0 + d1 + d2
+    s_w = 2.0 * np.sqrt(np.maximum(1.0 + t, 0.0))
+    s_x = 2.0 * np.sqrt(np.maximum(1.0 + d0 - d1 - d2, 0.0))
+    s_y = 2.0 * np.sqrt(np.maximum(1.0 - d0 + d1 - d2, 0.0))
+    s_z = 2.0 * np.sqrt(np.maximum(1.0 - d0 - d1 + d2, 0.0))
+    w21, w02, w10 = r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]
+    a01, a02, a12 = r[:, 0, 1] + r[:, 1, 0], r[:, 0, 2] + r[:, 2, 0], r[:, 1, 2] + r[:, 2, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):  # the pivots not taken
+        by_pivot = np.stack([
+            np.stack([0.25 * s_w, w21 / s_w, w02 / s_w, w10 / s_w], axis=1),
+            np.stack([w21 / s_x, 0.25 * s_x, a01 / s_x, a02 / s_x], axis=1),
+            np.stack([w02 / s_y, a01 / s_y, 0.25 * s_y, a12 / s_y], axis=1),
+            np.stack([w10 / s_z, a02 / s_z, a12 / s_z, 0.25 * s_z], axis=1)])
+    pivot = np.argmax(np.stack([t, d0, d1, d2], axis=1), axis=1)
+    q = by_pivot[pivot, np.arange(len(r))]
+    q /= _lengths(q)
+    return q * np.where(q[:, :1] < 0, -1.0, 1.0)
+
+
+def _lengths(q: np.ndarray) -> np.ndarray:
+    """(k, 1) lengths of the rows of q: (k, 4), each the dot product np.linalg.norm
+    takes of one vector, so a quaternion gets the same bits in a batch as alone."""
+    return np.sqrt(q[:, None, :] @ q[:, :, None])[:, 0]
+
+
+def quaternion_from_matrix(m) -> np.ndarray:
+    """Unit quaternion (4,) = (w, x, y, z), w >= 0, of the rotation part of a (4, 4)/(3, 3)."""
+    return quaternions_from_matrices(np.asarray(m, dtype=np.float64)[None])[0]
+
+
+def matrices_from_quaternions(q) -> np.ndarray:
+    """(k, 3, 3) float64 rotations of quaternions q: (k, 4) = (w, x, y, z), each
+    normalised here (q and -q give the same rotation)."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    w, x, y, z = (q / _lengths(q)).T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1)], axis=1)
 
 
 def matrix_from_quaternion(q, xyz=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """(4, 4) float64 pose from a quaternion (4,) = (w, x, y, z) (normalised here)."""
-    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    """(4, 4) float64 pose from a quaternion (4,) = (w, x, y, z) (normalised here) and
+    a translation xyz (3,)."""
     m = np.eye(4)
-    m[:3, :3] = [
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ]
+    m[:3, :3] = matrices_from_quaternions(q)[0]
     m[:3, 3] = np.asarray(xyz, dtype=np.float64)
     return m
+
+
+def quaternion_from_axis_angle(axis, angle: float) -> np.ndarray:
+    """(4,) = (w, x, y, z) of a rotation by `angle` rad about `axis` (3,) (normalised
+    here; a zero axis means Z)."""
+    a = np.asarray(axis, dtype=np.float64)
+    n = np.linalg.norm(a)
+    a = a / n if n > 0 else np.array([0.0, 0.0, 1.0])
+    return np.array([math.cos(angle / 2.0), *(a * math.sin(angle / 2.0))])
+
+
+def continuous_quaternions(q) -> np.ndarray:
+    """(k, 4) quaternions q: (k, 4) with signs flipped so each lies on the hemisphere of
+    the one before: a slerp between neighbours then never takes the long way round
+    (w >= 0 is given up for continuity)."""
+    out = np.array(q, dtype=np.float64).reshape(-1, 4)
+    for k in range(1, len(out)):
+        if float(out[k] @ out[k - 1]) < 0:
+            out[k] = -out[k]
+    return out
 
 
 def decompose(m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -16,58 +16,18 @@ channels. Quaternions are kept on one hemisphere so slerp never takes the long w
 
 from __future__ import annotations
 
-import json
-import os
-import struct
 from pathlib import Path
 
 import numpy as np
 
+from .. import glb
 from ..export import names
-from ..geometry.transform import quaternion_from_matrix
-
-_C = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-_GLB_MAGIC, _JSON, _BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
-_FLOAT = 5126
+from ..files import atomic_write
+from ..geometry.transform import continuous_quaternions, quaternions_from_matrices
 
 
-def read_glb(data: bytes) -> tuple[dict, bytearray]:
-    magic, version, length = struct.unpack_from("<III", data, 0)
-    if magic != _GLB_MAGIC or version != 2:
-        raise ValueError("not a glTF 2.0 binary")
-    offset, doc, binary = 12, None, bytearray()
-    while offset < length:
-        size, kind = struct.unpack_from("<II", data, offset)
-        chunk = data[offset + 8: offset + 8 + size]
-        if kind == _JSON:
-            doc = json.loads(chunk.decode("utf-8"))
-        elif kind == _BIN:
-            binary = bytearray(chunk)
-        offset += 8 + size
-    return doc, binary
-
-
-def glb_bytes(doc: dict, binary: bytes) -> bytes:
-    text = json.dumps(doc, sort_keys=True, separators=(",", ":")).encode("utf-8")
-    text += b" " * (-len(text) % 4)
-    binary = bytes(binary) + b"\0" * (-len(binary) % 4)
-    chunks = struct.pack("<II", len(text), _JSON) + text
-    if binary:
-        chunks += struct.pack("<II", len(binary), _BIN) + binary
-    return struct.pack("<III", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
-
-
-def _accessor(doc: dict, binary: bytearray, array: np.ndarray, kind: str, minmax: bool = False) -> int:
-    array = np.ascontiguousarray(array, dtype="<f4")
-    binary.extend(b"\0" * (-len(binary) % 4))
-    doc.setdefault("bufferViews", []).append({"buffer": 0, "byteOffset": len(binary), "byteLength": array.nbytes})
-    binary.extend(array.tobytes())
-    acc = {"bufferView": len(doc["bufferViews"]) - 1, "componentType": _FLOAT,
-           "count": int(array.shape[0]), "type": kind}
-    if minmax:
-        acc["min"], acc["max"] = [float(array.min())], [float(array.max())]
-    doc.setdefault("accessors", []).append(acc)
-    return len(doc["accessors"]) - 1
+def _accessor(buffer: glb.Buffer, array: np.ndarray, kind: str, bounds: bool = False) -> int:
+    return buffer.add_accessor(np.asarray(array, dtype=np.float32), kind, bounds=bounds)
 
 
 def _visual_nodes(doc: dict) -> dict[tuple[str, str], int]:
@@ -80,29 +40,12 @@ def _visual_nodes(doc: dict) -> dict[tuple[str, str], int]:
     return out
 
 
-def _y_up(m: np.ndarray) -> np.ndarray:
-    c4 = np.eye(4)
-    c4[:3, :3] = _C
-    return c4 @ m @ c4.T
-
-
-def _quats(mats: list[np.ndarray]) -> np.ndarray:
-    qs, prev = [], None
-    for m in mats:
-        w, x, y, z = quaternion_from_matrix(m)
-        q = np.array([x, y, z, w])
-        if prev is not None and float(q @ prev) < 0:
-            q = -q
-        qs.append(q)
-        prev = q
-    return np.array(qs)
-
-
 def animate(data: bytes, tag: str, run) -> tuple[bytes, list[str]]:
     """An animated copy of one placement's model glb; returns (bytes, not applied)."""
-    doc, binary = read_glb(data)
+    doc, binary = glb.parse(data, f"the model glb of {tag}")
     if not doc.get("buffers"):
         doc["buffers"] = [{"byteLength": 0}]
+    buffer = glb.Buffer(doc.get("bufferViews", []), doc.get("accessors", []), bytearray(binary))
     nodes_by_visual = _visual_nodes(doc)
     times = np.asarray(run.times, dtype=np.float64)
     frames = [{(v.link, v.visual): v for v in f if v.tag == tag} for f in run.frames]
@@ -113,8 +56,8 @@ def animate(data: bytes, tag: str, run) -> tuple[bytes, list[str]]:
     def channel(node: int, path: str, values: np.ndarray, kind: str):
         nonlocal t_acc
         if t_acc is None:
-            t_acc = _accessor(doc, binary, times, "SCALAR", minmax=True)
-        samplers.append({"input": t_acc, "output": _accessor(doc, binary, values, kind), "interpolation": "LINEAR"})
+            t_acc = _accessor(buffer, times, "SCALAR", bounds=True)
+        samplers.append({"input": t_acc, "output": _accessor(buffer, values, kind), "interpolation": "LINEAR"})
         channels.append({"sampler": len(samplers) - 1, "target": {"node": node, "path": path}})
 
     for key in keys:
@@ -129,9 +72,10 @@ def animate(data: bytes, tag: str, run) -> tuple[bytes, list[str]]:
             first = f.get(key, first)
             seq.append(first)
         effects = {bo.binding["effect"] for bo in seq[0].outputs}
-        mats = [_y_up(v.transform) for v in seq]
+        mats = glb.to_y_up(np.array([v.transform for v in seq]))
         if "rotate" in effects:
-            channel(node, "rotation", _quats(mats), "VEC4")
+            channel(node, "rotation", glb.to_gltf_rotation(continuous_quaternions(quaternions_from_matrices(mats))),
+                    "VEC4")
         if "translate" in effects:
             channel(node, "translation", np.array([m[:3, 3] for m in mats]), "VEC3")
         if "scale" in effects:
@@ -166,8 +110,11 @@ def animate(data: bytes, tag: str, run) -> tuple[bytes, list[str]]:
             doc.setdefault("animations", []).append(anim)
         else:
             doc.setdefault("extras", {})["KHR_materials_variants_selection"] = selection
-    doc["buffers"][0]["byteLength"] = len(binary) + (-len(binary) % 4)
-    return glb_bytes(doc, binary), skipped
+    for key, items in (("bufferViews", buffer.views), ("accessors", buffer.accessors)):
+        if items:  # glTF allows no empty arrays
+            doc[key] = items
+    doc["buffers"][0]["byteLength"] = glb.padded_length(buffer.binary)
+    return glb.pack(doc, buffer.binary), skipped
 
 
 def write(run, out_dir: Path) -> dict:
@@ -180,10 +127,6 @@ def write(run, out_dir: Path) -> dict:
             continue
         data, notes = animate(src.read_bytes(), ob.tag, run)
         skipped += notes
-        out_dir.mkdir(parents=True, exist_ok=True)
-        dst = out_dir / f"{names.safe_name(ob.tag)}.glb"
-        tmp = dst.with_name(dst.name + ".tmp")
-        tmp.write_bytes(data)
-        os.replace(tmp, dst)
+        dst = atomic_write(out_dir / f"{names.safe_name(ob.tag)}.glb", data)
         files.append(str(dst))
     return {"files": files, "not_applied": skipped}

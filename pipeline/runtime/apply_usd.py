@@ -33,16 +33,18 @@ from pathlib import Path
 import numpy as np
 
 from ..export import names
+from ..files import atomic_path
+from ..geometry.transform import quaternion_from_axis_angle
 from .nodes import delta_matrix
 
 SUN_PATH = f"{names.SCENE_ROOT}/Sun"
 
 
 def _quat(Gf, axis, angle: float):
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a) if np.linalg.norm(a) > 0 else np.array([0.0, 0.0, 1.0])
-    s = math.sin(angle / 2.0)
-    return Gf.Quatd(math.cos(angle / 2.0), Gf.Vec3d(*(a * s)))
+    """Gf.Quatd (real part first, as the pipeline's (w, x, y, z)) of a rotation by
+    `angle` rad about `axis`."""
+    w, x, y, z = (float(c) for c in quaternion_from_axis_angle(axis, angle))
+    return Gf.Quatd(w, Gf.Vec3d(x, y, z))
 
 
 LOOK_INPUTS = (("diffuseColor", "Color3f"), ("emissiveColor", "Color3f"), ("metallic", "Float"),
@@ -87,11 +89,14 @@ def _set_look(shader, record: dict, k: int) -> None:
 
 def write(run, scene_usda: Path, out_path: Path) -> dict:
     """Author the layer; returns a summary (samples written, things not applied)."""
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdSkel, Vt
     out_path = Path(out_path)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    # Author in a file beside the target so the relative sublayer path resolves.
-    tmp = out_path.with_name(out_path.name + ".tmp.usda")
+    # Authored in a file beside the target, so the relative sublayer path resolves.
+    with atomic_path(out_path) as tmp:
+        return _author(run, Path(scene_usda), out_path, tmp)
+
+
+def _author(run, scene_usda: Path, out_path: Path, tmp: Path) -> dict:
+    from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdSkel, Vt
     layer = Sdf.Layer.CreateNew(str(tmp))
     layer.subLayerPaths.append(os.path.relpath(Path(scene_usda).resolve(), out_path.parent.resolve()).replace(os.sep, "/"))
     stage = Usd.Stage.Open(layer)
@@ -195,5 +200,4 @@ def write(run, scene_usda: Path, out_path: Path) -> dict:
                 intensity.Set(float(irr) * run.sun_intensity_scale, k)
                 sun_samples += 1
     layer.Save()
-    os.replace(tmp, out_path)
     return {"file": str(out_path), "visual_samples": samples, "sun_samples": sun_samples, "not_applied": skipped}

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import config
+from .. import config, glb
 from ..fork_join import beside
 from ..export import names
 from . import placements as placing
@@ -162,24 +162,14 @@ def _terrain_heights(folder: Path, placed, terrain_manifest, height_at) -> np.nd
     check tests what was written, not what was meant."""
     from .. import ir
 
-    doc, binary = scene_gltf.read_glb(folder / names.gltf_file(folder.name))
+    doc, binary = glb.read(folder / names.gltf_file(folder.name))
     visuals = []
-    for ni, m in scene_gltf.visual_nodes(doc):
+    for ni, m in glb.visual_nodes(doc):
         prim = doc["meshes"][doc["nodes"][ni]["mesh"]]["primitives"][0]
-        pos = _accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
-        idx = _accessor(doc, binary, prim["indices"]).reshape(-1, 3)
-        pos = (np.c_[pos, np.ones(len(pos))] @ (m.T @ scene_gltf.Z_TO_Y))[:, :3]  # Y-up -> ENU
+        pos = glb.accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+        idx = glb.accessor(doc, binary, prim["indices"]).reshape(-1, 3)
+        pos = (np.c_[pos, np.ones(len(pos))] @ (m.T @ glb.Z_TO_Y))[:, :3]  # Y-up -> ENU
         visuals.append(ir.Visual(str(ni), "x", (ir.Mesh(pos, idx),)))
     terrain = ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=visuals),))
     en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))
     return height_at(terrain, en)
-
-
-def _accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
-    acc = doc["accessors"][index]
-    view = doc["bufferViews"][acc["bufferView"]]
-    dtype = {5126: np.float32, 5125: np.uint32, 5123: np.uint16, 5121: np.uint8}[acc["componentType"]]
-    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
-    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    arr = np.frombuffer(binary, dtype=dtype, count=acc["count"] * width, offset=start)
-    return arr.reshape(acc["count"], width) if width > 1 else arr

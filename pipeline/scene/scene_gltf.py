@@ -12,120 +12,16 @@ It reads the built model .glb files (the packages are its input, not the IR).
 from __future__ import annotations
 
 import json
-import struct
 from collections import defaultdict
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
+from .. import glb
 from ..export.names import gltf_file
+from ..geometry.transform import quaternion_from_matrix, quaternions_from_matrices
 from .placements import Placed
-
-GLB_MAGIC = 0x46546C67
-CHUNK_JSON = 0x4E4F534A
-CHUNK_BIN = 0x004E4942
-
-# Z-up scene frame -> glTF Y-up: (x, y, z) -> (x, z, -y)
-Z_TO_Y = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)
-
-
-def read_glb(path: Path) -> tuple[dict, bytes]:
-    data = Path(path).read_bytes()
-    magic, version, length = struct.unpack_from("<III", data, 0)
-    if magic != GLB_MAGIC or version != 2:
-        raise ValueError(f"{path}: not a glTF 2.0 binary")
-    offset, doc, bin_chunk = 12, None, b""
-    while offset < length:
-        clen, ctype = struct.unpack_from("<II", data, offset)
-        chunk = data[offset + 8: offset + 8 + clen]
-        if ctype == CHUNK_JSON:
-            doc = json.loads(chunk)
-        elif ctype == CHUNK_BIN:
-            bin_chunk = chunk
-        offset += 8 + clen
-    return doc, bin_chunk
-
-
-def write_glb(path: Path, doc: dict, binary: bytes) -> None:
-    text = json.dumps(doc, sort_keys=True, separators=(",", ":")).encode()
-    text += b" " * (-len(text) % 4)
-    binary = binary + b"\0" * (-len(binary) % 4)
-    total = 12 + 8 + len(text) + (8 + len(binary) if binary else 0)
-    out = struct.pack("<III", GLB_MAGIC, 2, total) + struct.pack("<II", len(text), CHUNK_JSON) + text
-    if binary:
-        out += struct.pack("<II", len(binary), CHUNK_BIN) + binary
-    Path(path).write_bytes(out)
-
-
-def node_matrix(node: dict) -> np.ndarray:
-    if "matrix" in node:
-        return np.array(node["matrix"], dtype=np.float64).reshape(4, 4).T
-    m = np.eye(4)
-    if "scale" in node:
-        m = np.diag([*node["scale"], 1.0]) @ m
-    if "rotation" in node:
-        m = quat_to_matrix(node["rotation"]) @ m
-    if "translation" in node:
-        t = np.eye(4)
-        t[:3, 3] = node["translation"]
-        m = t @ m
-    return m
-
-
-def quat_to_matrix(q) -> np.ndarray:
-    x, y, z, w = (float(v) for v in q)
-    m = np.eye(4)
-    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
-    return m
-
-
-def matrix_to_quat(r: np.ndarray) -> np.ndarray:
-    """(x, y, z, w) of a 3x3 rotation; Shepperd's method for stability."""
-    return matrices_to_quats(np.asarray(r, dtype=np.float64)[None])[0]
-
-
-def matrices_to_quats(r: np.ndarray) -> np.ndarray:
-    """(k, 4) unit quaternions (x, y, z, w), w >= 0, of rotations r: (k, 3, 3).
-    Shepperd's method: each matrix takes the branch of its largest of (trace, diagonal),
-    so no branch divides by a small number."""
-    r = np.asarray(r, dtype=np.float64).reshape(-1, 3, 3)
-    d0, d1, d2 = r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]
-    t = d0 + d1 + d2
-    with np.errstate(invalid="ignore", divide="ignore"):  # the branches not taken
-        sw, s0 = np.sqrt(t + 1.0) * 2, np.sqrt(1.0 + d0 - d1 - d2) * 2
-        s1, s2 = np.sqrt(1.0 + d1 - d0 - d2) * 2, np.sqrt(1.0 + d2 - d0 - d1) * 2
-        a01, a02, a12 = r[:, 0, 1] + r[:, 1, 0], r[:, 0, 2] + r[:, 2, 0], r[:, 1, 2] + r[:, 2, 1]
-        w21, w02, w10 = r[:, 2, 1] - r[:, 1, 2], r[:, 0, 2] - r[:, 2, 0], r[:, 1, 0] - r[:, 0, 1]
-        branches = np.stack([
-            np.stack([w21 / sw, w02 / sw, w10 / sw, 0.25 * sw], axis=1),
-            np.stack([0.25 * s0, a01 / s0, a02 / s0, w21 / s0], axis=1),
-            np.stack([a01 / s1, 0.25 * s1, a12 / s1, w02 / s1], axis=1),
-            np.stack([a02 / s2, a12 / s2, 0.25 * s2, w10 / s2], axis=1)])
-    pick = np.where(t > 0, 0, 1 + np.argmax(np.stack([d0, d1, d2], axis=1), axis=1))
-    q = branches[pick, np.arange(len(r))]
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return q * np.where(q[:, 3:4] >= 0, 1.0, -1.0)
-
-
-def visual_nodes(doc: dict) -> list[tuple[int, np.ndarray]]:
-    """(node index, global matrix) of every mesh node reachable from the default scene."""
-    out = []
-    scene = doc["scenes"][doc.get("scene", 0)]
-
-    def walk(i, parent):
-        node = doc["nodes"][i]
-        m = parent @ node_matrix(node)
-        if "mesh" in node:
-            out.append((i, m))
-        for c in node.get("children", []):
-            walk(c, m)
-
-    for root in scene["nodes"]:
-        walk(root, np.eye(4))
-    return out
 
 
 class SceneBuilder:
@@ -135,27 +31,19 @@ class SceneBuilder:
         self.doc = {"asset": {"version": "2.0", "generator": "substation-twin"}, "scene": 0,
                     "scenes": [{"name": "scene", "nodes": []}], "nodes": [], "meshes": [],
                     "materials": [], "accessors": [], "bufferViews": [], "buffers": []}
-        self.bin = bytearray()
+        self.buffer = glb.Buffer(self.doc["bufferViews"], self.doc["accessors"])
         self.used_ext: set[str] = set()
         self._mesh_cache: dict[tuple[str, int], int] = {}
         self._material_cache: dict[tuple[str, int], int] = {}
         self.variants: list[str] = []  # KHR_materials_variants names, in order of first use
 
-    def _append(self, data: bytes) -> int:
-        self.bin += b"\0" * (-len(self.bin) % 4)
-        off = len(self.bin)
-        self.bin += data
-        return off
-
     def _copy_accessor(self, src: dict, src_bin: bytes, index: int) -> int:
         acc = dict(src["accessors"][index])
         view = src["bufferViews"][acc["bufferView"]]
         start = view.get("byteOffset", 0)
-        data = src_bin[start: start + view["byteLength"]]
-        new_view = {k: v for k, v in view.items() if k in ("byteLength", "byteStride", "target")}
-        new_view.update(buffer=0, byteOffset=self._append(data))
-        self.doc["bufferViews"].append(new_view)
-        acc["bufferView"] = len(self.doc["bufferViews"]) - 1
+        acc["bufferView"] = self.buffer.add_view(src_bin[start: start + view["byteLength"]], view.get("target"))
+        if "byteStride" in view:
+            self.doc["bufferViews"][-1]["byteStride"] = view["byteStride"]
         self.doc["accessors"].append(acc)
         return len(self.doc["accessors"]) - 1
 
@@ -215,18 +103,8 @@ class SceneBuilder:
     def instance_accessors(self, transforms: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict[str, int]:
         """TRANSLATION / ROTATION / SCALE accessors of instance transforms (Y-up), from
         (translations (k, 3), rotations (k, 4), scales (k, 3)) float32 (instance_transforms)."""
-        out = {}
-        for name, arr, typ in zip(("TRANSLATION", "ROTATION", "SCALE"), transforms, ("VEC3", "VEC4", "VEC3")):
-            view = {"buffer": 0, "byteOffset": self._append(arr.tobytes()), "byteLength": arr.nbytes}
-            self.doc["bufferViews"].append(view)
-            acc = {"bufferView": len(self.doc["bufferViews"]) - 1, "componentType": 5126,
-                   "count": len(arr), "type": typ}
-            if name == "TRANSLATION":
-                acc["min"] = [float(v) for v in arr.min(axis=0)]
-                acc["max"] = [float(v) for v in arr.max(axis=0)]
-            self.doc["accessors"].append(acc)
-            out[name] = len(self.doc["accessors"]) - 1
-        return out
+        return {name: self.buffer.add_accessor(arr, typ, bounds=name == "TRANSLATION")
+                for name, arr, typ in zip(("TRANSLATION", "ROTATION", "SCALE"), transforms, ("VEC3", "VEC4", "VEC3"))}
 
     def add_node(self, node: dict, root: bool = True) -> int:
         self.doc["nodes"].append(node)
@@ -237,12 +115,12 @@ class SceneBuilder:
 
 
 def instance_transforms(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(translations (k, 3), rotations (k, 4) x, y, z, w, scales (k, 3)) float32 of
-    `matrices: (k, 4, 4)`: computed for every instanced node of a scene at once (one
-    call per node cost a tenth of a second over the sample's 789)."""
+    """(translations (k, 3), rotations (k, 4) glTF's x, y, z, w, scales (k, 3)) float32
+    of `matrices: (k, 4, 4)`, for EXT_mesh_gpu_instancing: computed for every
+    instanced node of a scene at once, not node by node."""
     m = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
     scale = np.linalg.norm(m[:, :3, :3], axis=1)  # (k, 3): the length of each column
-    rotation = matrices_to_quats(m[:, :3, :3] / scale[:, None, :])
+    rotation = glb.to_gltf_rotation(quaternions_from_matrices(m[:, :3, :3] / scale[:, None, :]))
     return m[:, :3, 3].astype(np.float32), rotation.astype(np.float32), scale.astype(np.float32)
 
 
@@ -258,15 +136,6 @@ class _GroupVisual(NamedTuple):
     members: list[Placed]
     matrices: np.ndarray
     morphs: bool
-
-
-def lod_meshes(doc: dict, node_index: int) -> list[int]:
-    """Mesh indices of a visual node's LOD chain: its own, then MSFT_lod's nodes."""
-    node = doc["nodes"][node_index]
-    chain = [node["mesh"]]
-    for i in node.get("extensions", {}).get("MSFT_lod", {}).get("ids", []):
-        chain.append(doc["nodes"][i]["mesh"])
-    return chain
 
 
 def _per_placement(sb: SceneBuilder, asset_id: str, lod: int, doc: dict, binary: bytes, node_index: int,
@@ -297,10 +166,10 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
         groups[(pl.placement.asset_id, pl.lod)].append(pl)
     sources = {}
     for asset_id in sorted({a for a, _ in groups} | {terrain_model}):
-        sources[asset_id] = read_glb(models / asset_id / gltf_file(asset_id))
+        sources[asset_id] = glb.read(models / asset_id / gltf_file(asset_id))
 
     doc, binary = sources[terrain_model]
-    for ni, m in visual_nodes(doc):
+    for ni, m in glb.visual_nodes(doc):
         mesh = sb.copy_mesh(terrain_model, doc, binary, doc["nodes"][ni]["mesh"])
         sb.add_node({"name": f"terrain/{doc['nodes'][ni].get('name', ni)}", "mesh": mesh,
                      "matrix": [float(v) for v in m.T.reshape(16)]} if not np.allclose(m, np.eye(4))
@@ -309,9 +178,9 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
     visuals = []
     for (asset_id, lod), members in sorted(groups.items()):
         doc = sources[asset_id][0]
-        poses = Z_TO_Y @ np.array([pl.pose for pl in members]) @ Z_TO_Y.T  # (k, 4, 4), Y up
-        for ni, local in visual_nodes(doc):
-            chain = lod_meshes(doc, ni)[lod:] or lod_meshes(doc, ni)[-1:]
+        poses = glb.to_y_up(np.array([pl.pose for pl in members]))  # (k, 4, 4)
+        for ni, local in glb.visual_nodes(doc):
+            chain = glb.lod_meshes(doc, ni)[lod:] or glb.lod_meshes(doc, ni)[-1:]
             morphs = any("targets" in p for p in doc["meshes"][chain[0]]["primitives"])
             matrices = poses @ local
             visuals.append(_GroupVisual(asset_id, lod, ni, chain, members, matrices, morphs))
@@ -343,13 +212,13 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
     d = -np.array([np.sin(np.radians(sun["azimuth_deg"])) * np.cos(np.radians(sun["elevation_deg"])),
                    np.cos(np.radians(sun["azimuth_deg"])) * np.cos(np.radians(sun["elevation_deg"])),
                    np.sin(np.radians(sun["elevation_deg"]))])
-    d_y = Z_TO_Y[:3, :3] @ d
+    d_y = glb.Z_TO_Y[:3, :3] @ d
     # a punctual directional light shines along its local -Z
     z = -d_y / np.linalg.norm(d_y)
     x = np.cross([0.0, 1.0, 0.0], z)
     x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
     y = np.cross(z, x)
-    q = matrix_to_quat(np.stack([x, y, z], axis=1))
+    q = glb.to_gltf_rotation(quaternion_from_matrix(np.stack([x, y, z], axis=1)))
     sb.doc["extensions"] = {"KHR_lights_punctual": {"lights": [
         {"name": "sun", "type": "directional", "color": [1.0, 0.96, 0.9], "intensity": float(sun["illuminance_lux"])}]}}
     if sb.variants:
@@ -362,8 +231,8 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
         "geodetic_origin": {"latitude_deg": float(origin_llh[0]), "longitude_deg": float(origin_llh[1]),
                             "height_m": float(origin_llh[2])}}
     sb.doc["extensionsUsed"] = sorted(sb.used_ext)
-    sb.doc["buffers"] = [{"byteLength": len(sb.bin) + (-len(sb.bin) % 4)}]
+    sb.doc["buffers"] = [{"byteLength": glb.padded_length(sb.buffer.binary)}]
     for key in ("materials", "meshes"):
         if not sb.doc[key]:
             del sb.doc[key]
-    write_glb(path, sb.doc, bytes(sb.bin))
+    glb.write(path, sb.doc, bytes(sb.buffer.binary))

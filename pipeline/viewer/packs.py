@@ -20,32 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..scene.scene_gltf import Z_TO_Y, lod_meshes, visual_nodes
+from .. import glb
 
-_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 _KEPT = ("POSITION", "NORMAL", "TEXCOORD_0", "TEXCOORD_1")  # attributes a tile keeps
 _TRIANGLES = 4
-
-
-def accessor(doc: dict, binary: bytes, index: int) -> np.ndarray:
-    """An accessor's values as (count, width) or (count,) in its component type
-    (strided views read element by element; sparse accessors are not written by the
-    exporters and are refused)."""
-    acc = doc["accessors"][index]
-    if "sparse" in acc or "bufferView" not in acc:
-        raise ValueError(f"accessor {index}: sparse or without a buffer view")
-    view = doc["bufferViews"][acc["bufferView"]]
-    dtype = np.dtype(_COMPONENTS[acc["componentType"]]).newbyteorder("<")
-    width = _WIDTH[acc["type"]]
-    start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    stride = view.get("byteStride", 0)
-    if stride and stride != dtype.itemsize * width:
-        rows = np.ndarray((acc["count"], width), dtype, buffer=binary, offset=start, strides=(stride, dtype.itemsize))
-        arr = np.array(rows)
-    else:
-        arr = np.frombuffer(binary, dtype, acc["count"] * width, start).reshape(acc["count"], width)
-    return arr if width > 1 else arr.reshape(-1)
 
 
 @dataclass
@@ -103,19 +81,19 @@ def _baked(doc: dict, binary: bytes, mesh_index: int, matrix: np.ndarray) -> lis
     for p in mesh["primitives"]:
         if p.get("mode", _TRIANGLES) != _TRIANGLES:
             continue
-        attrs = {name: accessor(doc, binary, i).astype(np.float64) for name, i in sorted(p["attributes"].items())
-                 if name in _KEPT and doc["accessors"][i]["componentType"] == 5126}
+        attrs = {name: glb.accessor(doc, binary, i).astype(np.float64) for name, i in sorted(p["attributes"].items())
+                 if name in _KEPT and doc["accessors"][i]["componentType"] == glb.FLOAT}
         for w, target in zip(weights, p.get("targets", [])):
             for name in ("POSITION", "NORMAL"):
                 if w and name in target and name in attrs:
-                    attrs[name] = attrs[name] + w * accessor(doc, binary, target[name])
+                    attrs[name] = attrs[name] + w * glb.accessor(doc, binary, target[name])
         attrs["POSITION"] = attrs["POSITION"] @ m3.T + matrix[:3, 3]
         if "NORMAL" in attrs:
             n = attrs["NORMAL"] @ normal_m.T
             length = np.linalg.norm(n, axis=1, keepdims=True)
             attrs["NORMAL"] = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
         count = len(attrs["POSITION"])
-        faces = (accessor(doc, binary, p["indices"]) if "indices" in p else np.arange(count)).astype(np.int64)
+        faces = (glb.accessor(doc, binary, p["indices"]) if "indices" in p else np.arange(count)).astype(np.int64)
         faces = faces[: len(faces) // 3 * 3].reshape(-1, 3)
         if flip:
             faces = faces[:, ::-1]
@@ -140,34 +118,6 @@ def _merged(parts: list[dict]) -> list[dict]:
     return merged
 
 
-class _Writer:
-    """Arrays appended to one binary, each with its view and accessor."""
-
-    def __init__(self):
-        self.binary = bytearray()
-        self.views: list[dict] = []
-        self.accessors: list[dict] = []
-
-    def view(self, data: bytes, target: int | None = None) -> int:
-        self.binary += b"\0" * (-len(self.binary) % 4)
-        view = {"byteOffset": len(self.binary), "byteLength": len(data)}
-        if target is not None:
-            view["target"] = target
-        self.binary += data
-        self.views.append(view)
-        return len(self.views) - 1
-
-    def array(self, arr: np.ndarray, kind: str, target: int, bounds: bool = False) -> int:
-        component = {np.dtype("<f4"): 5126, np.dtype("<u4"): 5125, np.dtype("<u2"): 5123}[arr.dtype]
-        acc = {"bufferView": self.view(arr.tobytes(), target), "componentType": component, "count": len(arr),
-               "type": kind}
-        if bounds:
-            acc["min"] = [float(v) for v in arr.min(axis=0)]
-            acc["max"] = [float(v) for v in arr.max(axis=0)]
-        self.accessors.append(acc)
-        return len(self.accessors) - 1
-
-
 def texture_refs(node, out: list[dict]) -> None:
     """Every {"index": ...} texture reference inside a material, in document order."""
     if isinstance(node, dict):
@@ -181,7 +131,7 @@ def texture_refs(node, out: list[dict]) -> None:
             texture_refs(v, out)
 
 
-def _copy_materials(pack: Pack, writer: _Writer, doc: dict, binary: bytes, used: list[int]) -> dict[int, int]:
+def _copy_materials(pack: Pack, writer: glb.Buffer, doc: dict, binary: bytes, used: list[int]) -> dict[int, int]:
     """The source materials `used` (indices) into the pack, with the textures, images
     and samplers they reference (images into the pack's binary); returns source ->
     pack material index."""
@@ -202,7 +152,7 @@ def _copy_materials(pack: Pack, writer: _Writer, doc: dict, binary: bytes, used:
                     if "bufferView" in image:
                         view = doc["bufferViews"][image["bufferView"]]
                         start = view.get("byteOffset", 0)
-                        image["bufferView"] = writer.view(binary[start: start + view["byteLength"]])
+                        image["bufferView"] = writer.add_view(binary[start: start + view["byteLength"]])
                     pack.images.append(image)
                     tex["source"] = len(pack.images) - 1
                 pack.textures.append(tex)
@@ -229,11 +179,11 @@ def make_pack(asset: str, level: int, doc: dict, binary: bytes) -> Pack:
     """The model glb (`doc`, `binary`: export.gltf's layout, MSFT_lod chains on its
     visual nodes) at `level` (a visual with a shorter chain shows its coarsest)."""
     parts = []
-    for ni, matrix in visual_nodes(doc):
-        chain = lod_meshes(doc, ni)
+    for ni, matrix in glb.visual_nodes(doc):
+        chain = glb.lod_meshes(doc, ni)
         parts += _baked(doc, binary, chain[min(level, len(chain) - 1)], matrix)
     merged = _merged(parts)
-    writer = _Writer()
+    writer = glb.Buffer(buffer=None)  # a tile names the buffer the pack's views are in
     pack = Pack(asset, level, b"", [], [], [], [])
     src_materials = sorted({m["material"] for m in merged if m["material"] >= 0}
                            | {mp["material"] for m in merged for mp in m["mappings"]})
@@ -244,12 +194,12 @@ def make_pack(asset: str, level: int, doc: dict, binary: bytes) -> Pack:
         pos = m["attributes"]["POSITION"]
         faces = m["faces"]
         index_type = "<u2" if len(pos) < 65536 else "<u4"
-        prim = {"indices": writer.array(faces.reshape(-1).astype(index_type), "SCALAR", 34963), "mode": _TRIANGLES,
-                "attributes": {}}
+        indices = writer.add_accessor(faces.reshape(-1).astype(index_type), "SCALAR", glb.ELEMENT_ARRAY_BUFFER)
+        prim = {"indices": indices, "mode": _TRIANGLES, "attributes": {}}
         for name in sorted(m["attributes"]):
             arr = m["attributes"][name].astype("<f4")
-            prim["attributes"][name] = writer.array(arr, "VEC3" if arr.shape[1] == 3 else "VEC2", 34962,
-                                                    bounds=name == "POSITION")
+            prim["attributes"][name] = writer.add_accessor(arr, "VEC3" if arr.shape[1] == 3 else "VEC2",
+                                                           glb.ARRAY_BUFFER, bounds=name == "POSITION")
             if name == "POSITION":
                 points.append(arr.astype(np.float64))  # as stored: the bounds enclose what is drawn
         if m["material"] >= 0:
@@ -260,7 +210,6 @@ def make_pack(asset: str, level: int, doc: dict, binary: bytes) -> Pack:
             pack.variants += [names[v] for mp in m["mappings"] for v in mp["variants"] if names[v] not in pack.variants]
         pack.primitives.append(prim)
         pack.triangles += len(faces)
-    y_to_z = Z_TO_Y[:3, :3].T
-    pack.hull = _hull_points(np.concatenate(points) @ y_to_z.T) if points else np.zeros((0, 3))
+    pack.hull = _hull_points(glb.points_to_z_up(np.concatenate(points))) if points else np.zeros((0, 3))
     pack.binary, pack.views, pack.accessors = bytes(writer.binary), writer.views, writer.accessors
     return pack

@@ -33,10 +33,11 @@ from urllib.parse import quote
 
 import numpy as np
 
+from .. import glb
 from ..export.names import gltf_file
 from ..scene.placements import yaw_matrix
-from ..scene.scene_gltf import Z_TO_Y, instance_transforms, lod_meshes, read_glb, visual_nodes, write_glb
-from .packs import Pack, accessor, make_pack, texture_refs
+from ..scene.scene_gltf import instance_transforms
+from .packs import Pack, make_pack, texture_refs
 
 TILESET = "tileset.json"
 MIN_CELL_M = 8.0  # no cell smaller: below it, a tile holds about one placement
@@ -147,39 +148,31 @@ def content_glb(path: Path, entries: list[tuple[Pack, np.ndarray, list[str]]], c
     doc = {"asset": {"version": "2.0", "generator": "substation-twin"}, "scene": 0,
            "buffers": [{}], "bufferViews": [], "accessors": [], "meshes": [], "materials": [], "nodes": [],
            "textures": [], "images": [], "samplers": []}
-    binary = bytearray()
+    instance_data = glb.Buffer(doc["bufferViews"], doc["accessors"])  # buffer 0, the tile's own
     used = {"EXT_mesh_gpu_instancing"}
     variants: list[str] = []
-    centre_y = Z_TO_Y[:3, :3] @ centre
+    centre_y = glb.points_to_y_up(centre)
     children = []
     for pack, poses, tags in entries:
         local = np.array(poses, dtype=np.float64)
         local[:, :3, 3] -= centre
-        matrices = Z_TO_Y @ local @ Z_TO_Y.T  # (k, 4, 4) Y up
-        instances = {}
-        for name, arr, kind in zip(("TRANSLATION", "ROTATION", "SCALE"), instance_transforms(matrices),
-                                   ("VEC3", "VEC4", "VEC3")):
-            binary += b"\0" * (-len(binary) % 4)
-            doc["bufferViews"].append({"buffer": 0, "byteOffset": len(binary), "byteLength": arr.nbytes})
-            binary += arr.astype("<f4").tobytes()
-            doc["accessors"].append({"bufferView": len(doc["bufferViews"]) - 1, "componentType": 5126,
-                                     "count": len(arr), "type": kind})
-            instances[name] = len(doc["accessors"]) - 1
+        matrices = glb.to_y_up(local)  # (k, 4, 4)
+        instances = {name: instance_data.add_accessor(arr, kind) for name, arr, kind in zip(
+            ("TRANSLATION", "ROTATION", "SCALE"), instance_transforms(matrices), ("VEC3", "VEC4", "VEC3"))}
         mesh = _add_pack(doc, pack, variants, used)
         doc["nodes"].append({"name": pack.asset, "mesh": mesh, "extras": {"tags": tags},
                              "extensions": {"EXT_mesh_gpu_instancing": {"attributes": instances}}})
         children.append(len(doc["nodes"]) - 1)
     doc["nodes"].append({"name": "tile", "children": children, "translation": [float(v) for v in centre_y]})
     doc["scenes"] = [{"nodes": [len(doc["nodes"]) - 1]}]
-    doc["buffers"][0] = {"byteLength": len(binary) + (-len(binary) % 4)}
+    doc["buffers"][0] = {"byteLength": glb.padded_length(instance_data.binary)}
     if variants:
         doc["extensions"] = {"KHR_materials_variants": {"variants": [{"name": n} for n in variants]}}
     doc["extensionsUsed"] = sorted(used)
     for key in ("textures", "images", "samplers", "materials"):
         if not doc[key]:
             del doc[key]
-    write_glb(path, doc, bytes(binary))
-    return path.stat().st_size
+    return glb.write(path, doc, bytes(instance_data.binary))
 
 
 def _add_pack(doc: dict, pack: Pack, variants: list[str], used: set[str]) -> int:
@@ -252,8 +245,8 @@ def packs_of(out: Path, models: Path, manifests: dict[str, dict], memo=None) -> 
     hash in its manifest, so a rerun bakes only the models that changed."""
     packs: dict[tuple[str, int], Pack] = {}
     for a in sorted(manifests):
-        glb = gltf_file(a)
-        digest = manifests[a].get("outputs", {}).get(glb)
+        model_file = gltf_file(a)
+        digest = manifests[a].get("outputs", {}).get(model_file)
         doc = binary = None
         for level in range(len(levels_of(manifests[a]))):
             dest = out / mesh_file(a, level)
@@ -264,7 +257,7 @@ def packs_of(out: Path, models: Path, manifests: dict[str, dict], memo=None) -> 
                     packs[(a, level)] = Pack.from_arrays(kept)
                     continue
             if doc is None:
-                doc, binary = read_glb(models / a / glb)
+                doc, binary = glb.read(models / a / model_file)
             pack = packs[(a, level)] = make_pack(a, level, doc, binary)
             dest.write_bytes(pack.binary)
             if memo is not None and digest:
@@ -358,12 +351,12 @@ def _terrain_tile(out: Path, models: Path, name: str) -> dict | None:
     path = models / name / gltf_file(name)
     if not path.is_file():
         return None
-    doc, binary = read_glb(path)
+    doc, binary = glb.read(path)
     points = []
-    for ni, m in visual_nodes(doc):
-        for p in doc["meshes"][lod_meshes(doc, ni)[0]]["primitives"]:
-            pos = accessor(doc, binary, p["attributes"]["POSITION"]).astype(np.float64)
-            points.append((pos @ m[:3, :3].T + m[:3, 3]) @ Z_TO_Y[:3, :3])  # Y up -> ENU
+    for ni, m in glb.visual_nodes(doc):
+        for p in doc["meshes"][glb.lod_meshes(doc, ni)[0]]["primitives"]:
+            pos = glb.accessor(doc, binary, p["attributes"]["POSITION"]).astype(np.float64)
+            points.append(glb.points_to_z_up(pos @ m[:3, :3].T + m[:3, 3]))  # ENU
     (out / "terrain.glb").write_bytes(path.read_bytes())
     if not points:
         return None
