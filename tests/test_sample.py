@@ -19,7 +19,6 @@ from pipeline.runtime.render import frames, gauge, sensor, study
 from pipeline.runtime.render import site as render_site
 
 ROOT = Path(__file__).resolve().parent.parent
-BUILD = ROOT / "build"
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender]
 
@@ -30,10 +29,8 @@ def twin(*args):
 
 
 @pytest.fixture(scope="module")
-def sample():
-    proc = twin("build", "--sources", ROOT / "sources", "--out", BUILD)
-    assert proc.returncode == 0, proc.stderr[-4000:]
-    return BUILD
+def sample(sample_build):
+    return sample_build
 
 
 def test_every_used_asset_has_a_package_within_budget(sample):

@@ -71,7 +71,10 @@ def run_dataset(config_path, out, *, frames: int | None = None, executor: str = 
         with _executor(executor, workers, scheduler, cfg.sensor.tasks_per_worker) as pool:
             futures = [pool.submit(render_frame, job, i) for i in todo]
             for f in as_completed(futures):
-                result = f.result()
+                try:
+                    result = f.result()
+                except Exception as e:  # noqa: BLE001 - a worker that died (a crash, killed for memory)
+                    raise UserError(cfg.path, "frames", f"a worker stopped: {type(e).__name__}: {e}") from None
                 if not result["ok"]:
                     raise UserError(cfg.path, f"frame {result['frame_id']}", result["error"])
                 seconds.append(result["seconds"])
