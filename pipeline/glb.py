@@ -1,15 +1,19 @@
-"""glTF 2.0 binary files (GLB): the one place that reads and writes their bytes.
+"""glTF 2.0 binary files (GLB): the one module that reads and writes their bytes.
 
 - The container: `parse` / `read` split a file into its JSON document and binary
-  chunk, and say which file is malformed and how; `pack` / `write` lay out the header
-  and the chunks (the JSON padded with spaces, the binary with zeros, each to 4 bytes)
-  with sorted keys, so the same document always gives the same bytes.
+  chunk and say which file is malformed and how; `pack` / `write` lay out the header
+  and the chunks (the JSON padded with spaces, the binary with zeros, each to 4
+  bytes) with sorted keys, so the same document always gives the same bytes.
 - The binary buffer: `Buffer` appends arrays, each in a 4-byte aligned bufferView
   with its accessor; `accessor` reads one back as an array.
 - The frame: the pipeline is Z up, glTF is Y up (+Z forward). `Z_TO_Y` is the one
   change of basis, (x, y, z) -> (x, z, -y); `to_y_up` / `to_z_up` move transforms
-  across it, `points_to_y_up` / `points_to_z_up` points. Quaternions cross into glTF's (x, y, z, w) order here too
-  (`to_gltf_rotation`), from the pipeline's (w, x, y, z) (geometry.transform).
+  across it, `points_to_y_up` / `points_to_z_up` points and directions. Quaternions
+  cross here too: the pipeline's (w, x, y, z) (geometry.transform) become glTF's
+  (x, y, z, w) in `to_gltf_rotation` and come back in `from_gltf_rotation`.
+- Nodes: `node_matrix`, `visual_nodes` (mesh nodes of the default scene with their
+  global matrices), `lod_meshes` (MSFT_lod chains) and `instance_transforms`
+  (EXT_mesh_gpu_instancing's TRS).
 
 Plain data in and out: a document is the glTF JSON as a dict, a binary is bytes.
 """
@@ -23,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .files import atomic_write
-from .geometry.transform import matrices_from_quaternions
+from .geometry.transform import matrices_from_quaternions, quaternions_from_matrices
 
 MAGIC = b"glTF"
 VERSION = 2
@@ -254,6 +258,18 @@ def to_gltf_rotation(q) -> np.ndarray:
 def from_gltf_rotation(q) -> np.ndarray:
     """(..., 4) glTF quaternions (x, y, z, w) in the pipeline's order (w, x, y, z)."""
     return np.asarray(q, dtype=np.float64)[..., [3, 0, 1, 2]]
+
+
+# ---------------------------------------------------------------- nodes
+
+def instance_transforms(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(translations (k, 3), rotations (k, 4) glTF's x, y, z, w, scales (k, 3)) float32
+    of `matrices: (k, 4, 4)`, for EXT_mesh_gpu_instancing: computed for every
+    instanced node of a scene at once, not node by node."""
+    m = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
+    scale = np.linalg.norm(m[:, :3, :3], axis=1)  # (k, 3): the length of each column
+    rotation = to_gltf_rotation(quaternions_from_matrices(m[:, :3, :3] / scale[:, None, :]))
+    return m[:, :3, 3].astype(np.float32), rotation.astype(np.float32), scale.astype(np.float32)
 
 
 def node_matrix(node: dict) -> np.ndarray:

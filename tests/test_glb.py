@@ -247,6 +247,18 @@ def test_gltf_stores_x_y_z_w():
     assert np.allclose(glb.node_matrix(node), expected, atol=1e-15)
 
 
+def test_instance_transforms_rebuild_the_matrices():
+    r = _rotations()[:40]
+    scales = np.linspace(0.5, 3.0, 3 * len(r)).reshape(-1, 3)
+    m = np.tile(np.eye(4), (len(r), 1, 1))
+    m[:, :3, :3] = r * scales[:, None, :]
+    m[:, :3, 3] = np.arange(3 * len(r)).reshape(-1, 3)
+    t, q, s = glb.instance_transforms(m)
+    assert t.dtype == q.dtype == s.dtype == np.float32
+    rebuilt = T.matrices_from_quaternions(glb.from_gltf_rotation(q)) * s[:, None, :].astype(np.float64)
+    assert np.abs(rebuilt - m[:, :3, :3]).max() < 1e-5 and np.allclose(t, m[:, :3, 3])
+
+
 def test_the_model_writer_stores_rotations_in_gltf_order(tmp_path):
     from pipeline import ir
     from pipeline.export import gltf, names

@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import glb
 from ..export.names import gltf_file
-from ..geometry.transform import quaternion_from_matrix, quaternions_from_matrices
+from ..geometry.transform import quaternion_from_matrix
 from .placements import Placed
 
 
@@ -102,7 +102,7 @@ class SceneBuilder:
 
     def instance_accessors(self, transforms: tuple[np.ndarray, np.ndarray, np.ndarray]) -> dict[str, int]:
         """TRANSLATION / ROTATION / SCALE accessors of instance transforms (Y-up), from
-        (translations (k, 3), rotations (k, 4), scales (k, 3)) float32 (instance_transforms)."""
+        (translations (k, 3), rotations (k, 4), scales (k, 3)) float32 (glb.instance_transforms)."""
         return {name: self.buffer.add_accessor(arr, typ, bounds=name == "TRANSLATION")
                 for name, arr, typ in zip(("TRANSLATION", "ROTATION", "SCALE"), transforms, ("VEC3", "VEC4", "VEC3"))}
 
@@ -112,16 +112,6 @@ class SceneBuilder:
         if root:
             self.doc["scenes"][0]["nodes"].append(i)
         return i
-
-
-def instance_transforms(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(translations (k, 3), rotations (k, 4) glTF's x, y, z, w, scales (k, 3)) float32
-    of `matrices: (k, 4, 4)`, for EXT_mesh_gpu_instancing: computed for every
-    instanced node of a scene at once, not node by node."""
-    m = np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)
-    scale = np.linalg.norm(m[:, :3, :3], axis=1)  # (k, 3): the length of each column
-    rotation = glb.to_gltf_rotation(quaternions_from_matrices(m[:, :3, :3] / scale[:, None, :]))
-    return m[:, :3, 3].astype(np.float32), rotation.astype(np.float32), scale.astype(np.float32)
 
 
 class _GroupVisual(NamedTuple):
@@ -185,7 +175,7 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
             matrices = poses @ local
             visuals.append(_GroupVisual(asset_id, lod, ni, chain, members, matrices, morphs))
     instanced = [v.matrices for v in visuals if not v.morphs]
-    transforms = instance_transforms(np.concatenate(instanced)) if instanced else None
+    transforms = glb.instance_transforms(np.concatenate(instanced)) if instanced else None
     start = 0
     for asset_id, lod, ni, chain, members, matrices, morphs in visuals:
         doc, binary = sources[asset_id]

@@ -35,8 +35,8 @@ import numpy as np
 
 from .. import glb
 from ..export.names import gltf_file
+from ..files import atomic_write
 from ..scene.placements import yaw_matrix
-from ..scene.scene_gltf import instance_transforms
 from .packs import Pack, make_pack, texture_refs
 
 TILESET = "tileset.json"
@@ -158,7 +158,7 @@ def content_glb(path: Path, entries: list[tuple[Pack, np.ndarray, list[str]]], c
         local[:, :3, 3] -= centre
         matrices = glb.to_y_up(local)  # (k, 4, 4)
         instances = {name: instance_data.add_accessor(arr, kind) for name, arr, kind in zip(
-            ("TRANSLATION", "ROTATION", "SCALE"), instance_transforms(matrices), ("VEC3", "VEC4", "VEC3"))}
+            ("TRANSLATION", "ROTATION", "SCALE"), glb.instance_transforms(matrices), ("VEC3", "VEC4", "VEC3"))}
         mesh = _add_pack(doc, pack, variants, used)
         doc["nodes"].append({"name": pack.asset, "mesh": mesh, "extras": {"tags": tags},
                              "extensions": {"EXT_mesh_gpu_instancing": {"attributes": instances}}})
@@ -357,7 +357,7 @@ def _terrain_tile(out: Path, models: Path, name: str) -> dict | None:
         for p in doc["meshes"][glb.lod_meshes(doc, ni)[0]]["primitives"]:
             pos = glb.accessor(doc, binary, p["attributes"]["POSITION"]).astype(np.float64)
             points.append(glb.points_to_z_up(pos @ m[:3, :3].T + m[:3, 3]))  # ENU
-    (out / "terrain.glb").write_bytes(path.read_bytes())
+    atomic_write(out / "terrain.glb", path.read_bytes())  # the model's bytes as they are
     if not points:
         return None
     pts = np.concatenate(points)
