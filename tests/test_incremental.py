@@ -247,15 +247,70 @@ def test_no_op_plan_skips_the_config_checks_it_passed_before(mini, tmp_path):
     assert len(json.loads((out / ".checked.json").read_text())) == 4  # nothing of the bad file kept
 
 
-def test_each_task_kind_is_keyed_on_its_own_action_and_not_on_the_planner():
-    """An action's module is in its kind's code version (an edit of it reruns those
-    tasks); the planner is in none (an edit of plan() reruns nothing)."""
-    from pipeline.builder import tasks
+ACTION_MODULES = {"source": "pipeline.builder.source_task", "geometry": "pipeline.builder.geometry_task",
+                  "asset": "pipeline.builder.package_task", "scene": "pipeline.builder.scene_task",
+                  "viewer": "pipeline.builder.viewer_task", "tiles": "pipeline.builder.tiles_task",
+                  "viewer:libs": "pipeline.builder.libs_task"}
 
-    for action, code in ((tasks.build_source, tasks.SOURCE_CODE), (tasks.build_geometry, tasks.GEOMETRY_CODE),
-                         (tasks.build_asset, tasks.PACKAGE_CODE)):
-        assert action.__module__ in code and "pipeline.builder.layout" in code
-        assert "pipeline.builder.tasks" not in code
-        others = {m for m in ("pipeline.builder.source_task", "pipeline.builder.geometry_task",
-                              "pipeline.builder.package_task") if m != action.__module__}
-        assert not others & set(code)
+
+def test_each_task_kind_is_keyed_on_its_own_action_and_not_on_the_planner(tmp_path):
+    """A task's code version is its action's module and what that imports (an edit
+    of it reruns those tasks); the planner and the other kinds' actions are in none
+    (an edit of plan() reruns nothing)."""
+    from pipeline.builder import code, tasks
+
+    for module in ACTION_MODULES.values():
+        used = set(code.modules_used(module))
+        assert module in used and "pipeline.builder.tasks" not in used
+        assert not (set(ACTION_MODULES.values()) - {module}) & used
+    assert "pipeline.builder.layout" in code.modules_used("pipeline.builder.source_task")
+    assert "pipeline.ingest.blend.walk" in code.modules_used("pipeline.builder.source_task")  # through readers
+    p = tasks.plan(mini_sources.make(tmp_path / "src"), tmp_path / "build")
+    assert {t.action.__module__ for t in p.tasks} == set(ACTION_MODULES.values())
+    for t in p.tasks:
+        assert t.code == code.code_of(t.action.__module__), t.name
+
+
+def test_a_task_key_changes_with_the_modules_it_imports_and_no_other(tmp_path):
+    """In a copy of the package: an edit of a module a task reaches through its
+    imports (directly, transitively, a package's __init__) changes that task's code
+    version; an edit of a module it does not reach leaves it as it was."""
+    from pipeline.builder import code
+
+    shutil.copytree(ROOT / "pipeline", tmp_path / "pipeline", ignore=shutil.ignore_patterns("__pycache__"))
+    kinds = ("source", "geometry", "asset", "scene", "tiles", "viewer:libs")
+
+    def versions() -> dict[str, str]:
+        return {k: code.code_of(ACTION_MODULES[k], root=tmp_path) for k in kinds}
+
+    def edit(module: str) -> set[str]:
+        """The kinds whose code version an edit of `module` changes."""
+        before = versions()
+        path = code.module_file(module, tmp_path)
+        path.write_text(path.read_text() + "\n# edited\n")
+        after = versions()
+        return {k for k in kinds if after[k] != before[k]}
+
+    assert edit("pipeline.ingest.mesh") == {"source"}
+    assert edit("pipeline.ingest.blend.walk") == {"source"}  # a package's module, through its __init__
+    assert edit("pipeline.geometry.simplify.backends") == {"geometry"}  # lod -> simplify -> backends
+    assert edit("pipeline.export.collada") == {"asset", "scene"}  # the terrain's package too
+    assert edit("pipeline.viewer.tiles") == {"tiles"}
+    assert edit("pipeline.viewer.libs") == {"viewer:libs"}
+    assert edit("pipeline.ir") == {"source", "geometry", "asset", "scene", "tiles"}
+    assert edit("pipeline.builder.tasks") == set()  # the planner
+    assert edit("pipeline.bench.builds") == set()
+    assert edit("pipeline.cli") == set()
+
+
+def test_the_import_scan_finds_every_import_a_full_parse_does():
+    """builder.code reads import statements without parsing whole modules: in every
+    pipeline module it finds each import statement ast.walk finds."""
+    import ast
+
+    from pipeline.builder.code import import_statements
+
+    for path in sorted((ROOT / "pipeline").rglob("*.py")):
+        text = path.read_text()
+        full = {ast.dump(n) for n in ast.walk(ast.parse(text)) if isinstance(n, (ast.Import, ast.ImportFrom))}
+        assert full <= {ast.dump(n) for n in import_statements(text)}, path

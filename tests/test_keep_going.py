@@ -24,15 +24,6 @@ from pipeline.errors import UserError
 ROOT = Path(__file__).resolve().parents[1]
 
 
-@pytest.fixture
-def src(tmp_path):
-    d = tmp_path / "src"
-    d.mkdir()
-    (d / "a.txt").write_text("alpha")
-    (d / "b.txt").write_text("beta")
-    return d
-
-
 def _graph(src: Path, out: Path, **actions) -> list:
     """The toy graph with some tasks' actions replaced (upper_b=toy_graph.refuse, ...)."""
     graph = toy_graph.tasks(src, out, delay=0.05)

@@ -16,15 +16,6 @@ import toy_graph
 HERE = Path(__file__).parent
 
 
-@pytest.fixture
-def src(tmp_path):
-    d = tmp_path / "src"
-    d.mkdir()
-    (d / "a.txt").write_text("alpha")
-    (d / "b.txt").write_text("beta")
-    return d
-
-
 def test_cold_then_noop(src, tmp_path):
     out = tmp_path / "build"
     r1 = toy_graph.build(src, out)
@@ -331,16 +322,16 @@ def test_a_build_on_a_shared_cache_leaves_another_builds_temporary_entries(tmp_p
 
 def test_code_version_follows_the_pinned_libraries(monkeypatch):
     """A new pin of a geometry library reruns the tasks: its results are theirs."""
-    from pipeline.builder import graph
+    from pipeline.builder import code
 
-    pins = graph.pinned_libraries()
+    pins = code.pinned_libraries()
     assert any(p.startswith("meshoptimizer==") for p in pins) and any(p.startswith("bpy==") for p in pins)
-    before = graph.code_version("pipeline.geometry")
+    before = code.code_of("pipeline.geometry.lod")
     bumped = [p if not p.startswith("meshoptimizer==") else "meshoptimizer==9.9.9" for p in pins]
-    monkeypatch.setattr(graph, "pinned_libraries", lambda: bumped)
-    assert graph.code_version("pipeline.geometry") != before
-    monkeypatch.setattr(graph, "pinned_libraries", lambda: pins)
-    assert graph.code_version("pipeline.geometry") == before
+    monkeypatch.setattr(code, "pinned_libraries", lambda: bumped)
+    assert code.code_of("pipeline.geometry.lod") != before
+    monkeypatch.setattr(code, "pinned_libraries", lambda: pins)
+    assert code.code_of("pipeline.geometry.lod") == before
 
 
 def _entries(cache: Path) -> set[str]:

@@ -68,10 +68,10 @@ def _writers(ctx: Context, built: Path) -> dict:
     """Seconds to write the tiles and the page of the built scene (no memo: the sun
     table is computed)."""
     from .. import config
-    from ..builder.viewer_task import _scene_inputs
+    from ..builder.scene_record import scene_inputs
     from ..viewer import page, tiles
 
-    record, manifests = _scene_inputs(built)
+    record, manifests = scene_inputs(built)
     site = config.load_site(ctx.shared.get("built_sources", ctx.sources) / "site.toml")
     lod = {"screen_tolerance_px": site.screen_tolerance_px, "reference_hfov_rad": site.reference_hfov_rad,
            "reference_width_px": site.reference_width_px}

@@ -15,11 +15,11 @@ import hashlib
 import json
 import os
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable
 
 from ..digest import sha256_file
+
 
 def canonical_json(data: Any) -> str:
     """The one text of a parameter set: sorted keys, no whitespace, repr floats."""
@@ -54,54 +54,6 @@ class FileHasher:
         return digest
 
 
-def code_version(*modules: str) -> str:
-    """Hash of the source text of the named modules or packages (pipeline.*) and of
-    the pinned libraries they run on (`pinned_libraries`), so a change to a step's
-    code reruns exactly the tasks that run that step, and an upgrade of a library
-    reruns every task."""
-    import importlib.util
-
-    h = hashlib.sha256()
-    h.update(canonical_json(pinned_libraries()).encode())
-    for name in sorted(set(modules)):
-        h.update(name.encode())
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.origin is None:  # not written yet: a later version differs
-            h.update(b"<absent>")
-            continue
-        origin = Path(spec.origin)
-        files = sorted(origin.parent.rglob("*.py")) if origin.name == "__init__.py" else [origin]
-        for f in files:
-            h.update(str(f.relative_to(origin.parent.parent) if origin.name == "__init__.py" else f.name).encode())
-            h.update(f.read_bytes())
-    return h.hexdigest()
-
-
-@lru_cache(maxsize=None)
-def pinned_libraries() -> list[str]:
-    """The project's pinned requirements (pyproject.toml beside the package, or the
-    installed package's metadata): what meshoptimizer, fcpw or libigl compute is part
-    of a task's result, so a new pin must not reuse entries made with the old one.
-    A library installed by hand at another version than its pin is not seen (reading
-    every installed version would cost a no-op build 40 ms)."""
-    import tomllib
-
-    pyproject = Path(__file__).resolve().parents[2] / "pyproject.toml"
-    try:
-        project = tomllib.loads(pyproject.read_text())["project"]
-        if project.get("name") == "substation-twin":
-            extras = project.get("optional-dependencies", {})
-            return sorted(project.get("dependencies", []) + extras.get("blender", []))
-    except (OSError, KeyError, ValueError):
-        pass
-    from importlib import metadata
-
-    try:
-        return sorted(metadata.requires("substation-twin") or [])
-    except metadata.PackageNotFoundError:
-        return []
-
-
 @dataclass
 class Task:
     """One unit of work.
@@ -110,7 +62,7 @@ class Task:
     deps:    names of tasks whose outputs this task reads (the digests of what they
              made enter this key).
     params:  JSON-serialisable parameters; enter the key as sorted JSON.
-    code:    code version of the steps the action runs.
+    code:    code version of the steps the action runs (builder.code).
     outputs: paths relative to the build folder, each produced by this task alone.
     cost:    a scheduling hint only (longest first); it never changes what a task makes.
     warm:    modules the action imports: a worker that is idle while this task waits

@@ -3,9 +3,9 @@ terrain, the scene.
 
 `plan()` reads the sources and returns the task graph. The actions run in worker
 processes and write into the staging folder they are given (paths relative to
-build/, builder.layout); each kind has its module, whose text is in that kind's
-code version (an edit of the planning here reruns no task). An asset's chain is
-three tasks:
+build/, builder.layout); each kind has its module, and the text of that module and
+of every pipeline module it imports is that kind's code version (builder.code): an
+edit of the planning here reruns no task. An asset's chain is three tasks:
 
 - `source:<id>` (builder.source_task): read the source file and clean it ->
   .source/<id>/<id>.ir (irfile), with the findings on the file as authored. The
@@ -22,6 +22,21 @@ So editing an asset's description, category, mass or triangle budget rewrites it
 package and leaves its geometry alone; editing an LOD budget reruns the last two and
 reads no source; editing the source reruns all three.
 
+After the scene (builder.scene_task, which also makes the terrain), the viewer's:
+
+- `viewer:libs` (builder.libs_task): three.js and CesiumJS from tools/node_modules
+  -> viewer/lib/. Keyed on the libraries' package.json (a version's files never
+  change), so it runs when npm installs another version, not when the scene changes.
+- `viewer` (builder.viewer_task): the pages, twin.json and the sun table -> viewer/
+  (but lib/). Reads placements.json, the placed models' manifests, site.toml and
+  the scenarios.
+- `tiles` (builder.tiles_task): the 3D Tiles tileset -> tiles/. Reads
+  placements.json, the placed models' packages and the terrain's, and site.toml's
+  [lod].
+
+Like the scene, the page and the tiles stand on a failed asset's last package (the
+scene was made from it), so they always show the scene that is there.
+
 An asset whose asset.toml cannot be read is one task, `asset:<id>`, that fails with
 that error without running (Task.problem): the other assets build, and the scene
 stands on the asset's last package if the build folder holds one (Task.previous_ok).
@@ -34,32 +49,22 @@ from pathlib import Path
 
 from .. import config, ir
 from ..errors import UserError
+from ..files import atomic_write
+from .code import code_of
 from .geometry_task import WARM as GEOMETRY_WARM, build_geometry
-from .graph import Task, code_version
+from .graph import Task
 from .layout import IR_FOLDER, SOURCE_FOLDER
+from .libs_task import build_libs
 from .package_task import WARM as PACKAGE_WARM, build_asset
+from .scene_task import WARM as SCENE_WARM, build_scene, build_terrain
 from .source_task import build_source
-from .viewer_task import viewer_tasks
+from .tiles_task import build_tiles
+from .viewer_task import build_viewer
 
-SOURCE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.blend", "pipeline.ingest.cad",
-               "pipeline.ingest.mesh", "pipeline.ingest.units", "pipeline.ingest.gltf_file", "pipeline.glb",
-               "pipeline.ingest.tessellate", "pipeline.geometry.clean", "pipeline.validate.checks", "pipeline.findings",
-               "pipeline.geometry.edges", "pipeline.fork_join",
-               "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.source_task")
-GEOMETRY_CODE = ("pipeline.ir", "pipeline.config", "pipeline.geometry", "pipeline.findings", "pipeline.fork_join",
-                 "pipeline.builder.irfile", "pipeline.builder.layout", "pipeline.builder.geometry_task")
-PACKAGE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.export", "pipeline.glb", "pipeline.digest",
-                "pipeline.validate.checks", "pipeline.findings", "pipeline.geometry.edges", "pipeline.builder.irfile",
-                "pipeline.builder.layout", "pipeline.builder.package_task")
-# what the per-mesh checks' memo entries depend on (findings.mesh_findings)
-CHECKS_CODE = ("pipeline.findings", "pipeline.geometry.edges", "pipeline.ir", "pipeline.digest")
-SCENE_CODE = ("pipeline.ir", "pipeline.config", "pipeline.ingest.floorplan", "pipeline.georef",
-              "pipeline.scene", "pipeline.export", "pipeline.glb", "pipeline.digest", "pipeline.geometry.transform",
-              "pipeline.findings", "pipeline.geometry.edges")
-# what build_scene imports (inside functions): an idle worker imports them ahead
-SCENE_WARM = ("pipeline.scene.assemble", "pipeline.scene.scene_gltf", "pipeline.scene.stage_usd",
-              "pipeline.scene.world_sdf", "pipeline.scene.checks", "pipeline.scene.terrain", "pipeline.georef",
-              "pipeline.ingest.floorplan", "pyproj", "astral", "pxr.Usd", "pxr.Sdf", "pxr.Gf")
+# what the memo entries of steps inside tasks depend on: the per-mesh checks'
+# findings (findings.mesh_findings) and the sun tables (viewer.sun_table)
+CHECKS_MODULE = "pipeline.findings"
+SUN_MODULE = "pipeline.viewer.sun_table"
 # asset.toml keys only the package task reads (the readers get neutral values for them)
 METADATA_KEYS = ("description", "category", "mass_kg", "triangle_budget")
 # asset.toml tables only the geometry task reads
@@ -77,21 +82,6 @@ def source_params(cfg: config.AssetConfig) -> dict:
 def geometry_params(cfg: config.AssetConfig) -> dict:
     """The asset.toml settings the geometry steps use (defaults filled in)."""
     return {"collision_mode": cfg.collision_mode, "lod_budgets_m": list(cfg.lod_budgets_m)}
-
-
-def build_terrain(staging: Path, sources: str, build: str) -> dict:
-    """Task action: the terrain package (scene.assemble, imported where it runs: a
-    plan needs no pyproj)."""
-    from ..scene.assemble import build_terrain as action
-
-    return action(staging=staging, sources=sources, build=build)
-
-
-def build_scene(staging: Path, sources: str, build: str) -> dict:
-    """Task action: the world in every format (scene.assemble)."""
-    from ..scene.assemble import build_scene as action
-
-    return action(staging=staging, sources=sources, build=build)
 
 
 # --- planning -----------------------------------------------------------------
@@ -162,15 +152,10 @@ def _read_passed(path: Path | None) -> set[str]:
 
 
 def _write_passed(path: Path, passed: set[str]) -> None:
-    """The keys this build met, atomically (an edited file's old key goes)."""
+    """The keys this build met (an edited file's old key goes)."""
     import json
-    import os
-    import uuid
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.name}.tmp-{uuid.uuid4().hex[:8]}")
-    tmp.write_text(json.dumps(sorted(passed)))
-    os.replace(tmp, path)
+    atomic_write(path, json.dumps(sorted(passed)))
 
 
 def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path | None = None) -> Plan:
@@ -192,9 +177,8 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
     for asset_id, problem in sorted(broken.items()):
         p.tasks.append(Task(name=f"asset:{asset_id}", stage="assets", action=build_asset, args={},
                             outputs=(f"models/{asset_id}/", f"models/{asset_id}__lod*"), problem=problem))
-    source_code = code_version(*SOURCE_CODE)
-    geometry_code, package_code = code_version(*GEOMETRY_CODE), code_version(*PACKAGE_CODE)
-    checks_code = code_version(*CHECKS_CODE)
+    source_code, geometry_code = code_of(build_source.__module__), code_of(build_geometry.__module__)
+    package_code, checks_code = code_of(build_asset.__module__), code_of(CHECKS_MODULE)
     memo = str(cache_root(build, cache).resolve())
     for asset_id in wanted:
         cfg = p.assets[asset_id]
@@ -250,7 +234,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
 def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     """The terrain task (the platform outlines -> its package) and the scene task
     (every placed asset's package and the terrain -> the world in three formats)."""
-    code = code_version(*SCENE_CODE)
+    code = code_of(build_scene.__module__)
     site = p.site
     tname = config.terrain_model_name(site)
     sources, build = Path(sources).resolve(), Path(build).resolve()
@@ -267,3 +251,30 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
                  deps=("terrain", *packages), params={"site": site.name}, code=code, outputs=("scene/",),
                  warm=SCENE_WARM, previous_ok=packages)
     return [terrain, scene]
+
+
+def viewer_tasks(site: config.Site, sources: Path, build: Path, placed_assets: list[str], memo: str) -> list[Task]:
+    """The viewer's three tasks, after the scene."""
+    from ..viewer import libs, page
+
+    sources, build = Path(sources).resolve(), Path(build).resolve()
+    args = {"sources": str(sources), "build": str(build)}
+    scenarios = tuple(sorted((sources / "scenarios").glob("*.toml")))
+    assets = tuple(f"asset:{a}" for a in placed_assets)
+    installed = libs.manifests()
+    tiles_code = code_of(build_tiles.__module__)
+    return [
+        Task(name="viewer:libs", stage="scene", action=build_libs, args={},
+             inputs=tuple(p for p in installed.values() if p is not None),
+             params={"installed": sorted(n for n, p in installed.items() if p)}, code=code_of(build_libs.__module__),
+             outputs=(f"{libs.LIB}/",)),
+        Task(name="viewer", stage="scene", action=build_viewer,
+             args={**args, "memo": memo, "memo_namespace": code_of(SUN_MODULE)},
+             inputs=(site.path.resolve(), *scenarios, *page.static_files()), deps=("scene", *assets),
+             params={"site": site.name}, code=code_of(build_viewer.__module__), previous_ok=assets,
+             outputs=tuple(f"viewer/{n}" for n in page.PAGES) + ("viewer/app/", "viewer/data/")),
+        Task(name="tiles", stage="scene", action=build_tiles,
+             args={**args, "memo": memo, "memo_namespace": tiles_code}, inputs=(site.path.resolve(),),
+             deps=("scene", "terrain", *assets), params={"site": site.name}, code=tiles_code,
+             outputs=("tiles/",), previous_ok=assets),
+    ]

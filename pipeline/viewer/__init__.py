@@ -10,5 +10,5 @@
 - `sun_table`: the runtime's ephemeris sampled for the page, and the site's clock.
 - `serve`: `twin view`; `check`: the pages in a headless browser (tests, the bench).
 
-builder.viewer_task holds the build tasks that run them.
+builder.viewer_task, tiles_task and libs_task hold the build tasks that run them.
 """
