@@ -13,7 +13,7 @@ from ..runtime.render.cycles import CyclesScene
 from ..runtime.render.frames import pointer_binding, populate
 from ..runtime.render.sensor import PhoneCamera, develop, metered_gain, metered_white_balance
 from ..runtime.render.site import load_site
-from ..runtime.render.study import STUDY_TARGET, study_shots
+from ..runtime.render.study import study_shots
 
 # CyclesScene renders at Blender's factory light paths; the peer and the reference differ
 # from ours only in their samples and denoiser.
@@ -69,7 +69,7 @@ def bench_render(out="build", repeats: int = 5, threads: int | None = None, sour
     finally:
         bl.close()
     result = {"frame": f"{cam.width}x{cam.height} {cam.samples} spp"
-                       f"{' + OIDN ' + cam.render_denoise if cam.render_denoise else ''}, solar_noon, {STUDY_TARGET}",
+                       f"{' + OIDN ' + cam.render_denoise if cam.render_denoise else ''}, solar_noon, {shot.target}",
               "setup": setup, "load_s": load_s, "loaded": sorted(t for t in bl.roots), "mesh_objects": objects,
               "lights": lights, "threads": threads or CyclesScene.THREADS, "samples": cam.samples,
               "render_denoise": cam.render_denoise, "median_s": statistics.median(times), "min_s": min(times),

@@ -63,7 +63,11 @@ class PhoneCamera:
     ~1,700 e-/um2 that sensor measurements show (Roger N. Clark's sensor performance
     summaries), and read noise of current CMOS sensors is 1.5-3 e-. Gains above
     gain_max / iso_max come from analog gain (ISO 50 to 3200: iso_max 64), which divides
-    the electrons a full-scale pixel holds: night frames are the noisy ones.
+    the electrons a full-scale pixel holds: night frames are the noisy ones. A phone
+    merges a burst of `burst_frames` such exposures into one picture (2-8 in daylight,
+    up to 15 at night: Hasinoff et al., "Burst photography for high dynamic range and
+    low-light imaging on mobile cameras"; Liba et al., "Handheld mobile photography in
+    very low light"), which divides the noise's variance by the burst's length.
 
     samples and render_denoise: the path tracer's budget. 4 samples through Cycles'
     OpenImageDenoise (albedo and normal guides, BALANCED quality, on the CPU) land
@@ -80,6 +84,7 @@ class PhoneCamera:
     glare_shoulder: float = 0.002  # rad
     full_well_e: float = 6000.0
     read_noise_e: float = 2.0
+    burst_frames: int = 8
     iso_max: float = 64.0
     width: int = 320
     height: int = 240
@@ -251,15 +256,17 @@ def frame_seed(seed: int, name: str) -> int:
 
 
 def sensor_noise(exposure: np.ndarray, gain: float, cam: PhoneCamera, seed: int) -> np.ndarray:
-    """Shot and read noise on the sensor's exposure (1.0 = full scale): electrons drawn
-    from Poisson(exposure x full-scale electrons), plus Gaussian read noise, back to
-    exposure units. Analog gain (above gain_max / iso_max) divides the full-scale
-    electrons, so a night frame's pixels hold a few dozen."""
+    """Shot and read noise on the sensor's exposure (1.0 = full scale) of a merged burst:
+    electrons drawn from Poisson(exposure x full-scale electrons x burst frames), plus
+    Gaussian read noise of that many reads, back to exposure units. Analog gain (above
+    gain_max / iso_max) divides the full-scale electrons, so a night frame's pixels
+    hold a few dozen per exposure."""
     analog = float(np.clip(gain * cam.iso_max / cam.gain_max, 1.0, cam.iso_max))
-    full_scale = cam.full_well_e / analog
+    full_scale = cam.full_well_e / analog * cam.burst_frames
     rng = np.random.default_rng(seed)
     mean_e = np.clip(exposure, 0.0, 2.0) * full_scale  # beyond full scale the pixel clips anyway
-    electrons = rng.poisson(mean_e).astype(np.float64) + rng.normal(0.0, cam.read_noise_e, mean_e.shape)
+    read = cam.read_noise_e * math.sqrt(cam.burst_frames)
+    electrons = rng.poisson(mean_e).astype(np.float64) + rng.normal(0.0, read, mean_e.shape)
     return electrons / full_scale
 
 
