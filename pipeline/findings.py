@@ -79,8 +79,6 @@ RULES: dict[str, tuple[str, str, str]] = {
     "GZ011": ("error", "gazebo", "dartsim cannot build the world as gz-sim's Physics system does"),
 }
 
-SEVERITIES = ("error", "warning", "info")
-
 # Tolerances, relative to the size of the thing measured so that millimetre parts and
 # 50 m busbars are judged alike.
 DEGENERATE_AREA_REL = 1e-12   # face area / bbox diagonal^2
