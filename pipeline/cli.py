@@ -188,6 +188,19 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
 
 
 @main.command()
+@click.argument("dataset_folder", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="build folder whose reports/ receive the report (default: the dataset's own build)")
+@user_errors
+def baseline(dataset_folder: Path, out: Path | None):
+    """The study's gauge reader over a dataset's conditions: reading error against sun
+    elevation and local time, into OUT/reports/baseline_<name>.json and .html."""
+    from .runtime.render.baseline import run_baseline
+
+    click.echo(str(run_baseline(dataset_folder, out)))
+
+
+@main.command()
 @OUT
 @click.option("--port", type=click.IntRange(0, 65535), default=8000, show_default=True,
               help="port on 127.0.0.1 (0: any free one)")

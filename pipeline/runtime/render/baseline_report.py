@@ -1,0 +1,170 @@
+"""The baseline's report: error by condition bin, plots against sun elevation and local
+time, OUT/reports/baseline_<name>.json + .html with the plots' PNGs beside them."""
+
+from __future__ import annotations
+
+import html
+import io
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ...files import atomic_write
+from .baseline import MIN_DIAL_PX, NOT_SCORED, STATUS_READ, UNREADABLE
+
+# (name, lowest sun elevation (deg, exclusive), highest (inclusive))
+BINS = (("night (sun <= 0 deg)", -90.0, 0.0), ("sun 0-10 deg", 0.0, 10.0), ("sun 10-30 deg", 10.0, 30.0),
+        ("sun > 30 deg", 30.0, 90.0))
+
+
+def bin_of(elevation_deg: float) -> str:
+    for name, lo, hi in BINS:
+        if lo < elevation_deg <= hi or (lo == -90.0 and elevation_deg <= hi):
+            return name
+    return BINS[-1][0]
+
+
+def _mean(values) -> float | None:
+    values = [v for v in values if v is not None]
+    return float(np.mean(values)) if values else None
+
+
+def summary(rows: list[dict]) -> dict:
+    """Counts and errors of a set of gauge rows: seen (labelled visible), not scored
+    (too small, cut), scored, read; the share read among the scored; the mean
+    absolute reading error of those read; H's mean and mean |H - 1| over the scored."""
+    scored = [r for r in rows if r["status"] not in NOT_SCORED]
+    read = [r for r in scored if r["status"] == STATUS_READ]
+    hs = [r["H"] for r in scored if r.get("H") is not None]
+    return {"seen": len(rows), "too_small": sum(r["status"] == "too_small" for r in rows),
+            "cut": sum(r["status"] == "cut" for r in rows), "scored": len(scored), "read": len(read),
+            "unreadable": {why: sum(r["status"] == why for r in scored) for why in UNREADABLE},
+            "share_read": len(read) / len(scored) if scored else None,
+            "mae": _mean(abs(r["error"]) for r in read),
+            "max_abs_error": max((abs(r["error"]) for r in read), default=None),
+            "mean_H": _mean(hs), "mae_H": _mean(abs(h - 1.0) for h in hs)}
+
+
+def bins_table(rows: list[dict]) -> list[dict]:
+    out = [{"bin": name, **summary([r for r in rows if bin_of(r["sun_elevation_deg"]) == name])}
+           for name, _, _ in BINS]
+    return out + [{"bin": "all", **summary(rows)}]
+
+
+# --- plots ------------------------------------------------------------------------------------------
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _png(fig) -> bytes:
+    """PNG bytes without the Software stamp: the same rows give the same file."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    _plt().close(fig)
+    return buf.getvalue()
+
+
+def plot(rows: list[dict], key: str, label: str, marks: tuple[float, ...]) -> bytes:
+    """|reading error| (top) and H (bottom) of the scored gauges against rows[key];
+    the unreadable ones as red crosses on the top plot's upper edge."""
+    plt = _plt()
+    scored = [r for r in rows if r["status"] not in NOT_SCORED]
+    read = [r for r in scored if r["status"] == STATUS_READ]
+    lost = [r for r in scored if r["status"] != STATUS_READ]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 5.6), sharex=True)
+    ceiling = max([abs(r["error"]) for r in read] + [10.0]) * 1.15
+    top.scatter([r[key] for r in read], [abs(r["error"]) for r in read], s=18, color="C0", label="read")
+    if lost:
+        top.scatter([r[key] for r in lost], [ceiling] * len(lost), marker="x", color="C3", s=24,
+                    label="unreadable")
+    top.set_ylim(0.0, ceiling * 1.08)
+    top.set_ylabel("|reading error| (% level)")
+    top.legend(loc="upper left", fontsize=8)
+    with_h = [r for r in scored if r.get("H") is not None]
+    bottom.scatter([r[key] for r in with_h], [r["H"] for r in with_h], s=18,
+                   c=["C0" if r["status"] == STATUS_READ else "C3" for r in with_h])
+    bottom.axhline(1.0, color="grey", lw=0.8, ls="--")
+    bottom.set_ylabel("H (extent / true extent)")
+    bottom.set_xlabel(label)
+    for ax in (top, bottom):
+        for x in marks:
+            ax.axvline(x, color="grey", lw=0.6, ls=":")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _png(fig)
+
+
+# --- the report ---------------------------------------------------------------------------------------
+
+
+def write_report(out: Path, name: str, folder: Path, rows: list[dict]) -> Path:
+    reports = out / "reports"
+    reports.mkdir(parents=True, exist_ok=True)
+    plots = {"sun": f"baseline_{name}_sun.png", "time": f"baseline_{name}_time.png"}
+    atomic_write(reports / plots["sun"], plot(rows, "sun_elevation_deg", "sun elevation (deg)",
+                                              tuple(hi for _, _, hi in BINS[:-1])))
+    atomic_write(reports / plots["time"], plot(rows, "local_hours", "local time (h)", ()))
+    report = {"dataset": name, "min_dial_px": MIN_DIAL_PX, "bins": bins_table(rows), "gauges": rows,
+              "plots": plots, "frames_with_gauges": len({r["frame_id"] for r in rows})}
+    atomic_write(reports / f"baseline_{name}.json", json.dumps(report, sort_keys=True, indent=1, allow_nan=False) + "\n")
+    images = Path(os.path.relpath(folder.resolve(), reports.resolve()))
+    atomic_write(reports / f"baseline_{name}.html", _html(report, images))
+    return reports / f"baseline_{name}.html"
+
+
+def _f(x, spec: str = ".1f") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def _html(report: dict, images: Path) -> str:
+    e = html.escape
+    head = ("<tr><th>condition</th><th>gauges seen</th><th>too small</th><th>cut by the frame</th><th>scored</th>"
+            "<th>read</th><th>share read</th><th>MAE (% level)</th><th>max |error|</th><th>mean H</th>"
+            "<th>mean |H - 1|</th><th>unreadable: no pointer / dark face / no line</th></tr>")
+    body = "".join(
+        f"<tr><td>{e(b['bin'])}</td><td>{b['seen']}</td><td>{b['too_small']}</td><td>{b['cut']}</td>"
+        f"<td>{b['scored']}</td><td>{b['read']}</td><td>{_f(b['share_read'], '.0%')}</td><td>{_f(b['mae'])}</td>"
+        f"<td>{_f(b['max_abs_error'])}</td><td>{_f(b['mean_H'], '.2f')}</td><td>{_f(b['mae_H'], '.2f')}</td>"
+        f"<td>{' / '.join(str(b['unreadable'][w]) for w in UNREADABLE)}</td></tr>"
+        for b in report["bins"])
+    gauge_head = ("<tr><th>frame</th><th>tag</th><th>camera</th><th>local time</th><th>sun el (deg)</th>"
+                  "<th>dial (px)</th><th>status</th><th>true %</th><th>read %</th><th>error</th><th>C</th><th>S</th>"
+                  "<th>H</th></tr>")
+    gauge_rows = "".join(
+        f"<tr><td><a href=\"{e((images / r['image']).as_posix())}\">{e(r['frame_id'])}</a></td><td>{e(r['tag'])}</td>"
+        f"<td>{e(str(r['camera']))}</td><td>{e(r['local_time'])}</td><td>{r['sun_elevation_deg']:.1f}</td>"
+        f"<td>{r['dial_px']:.0f}</td><td>{e(r['status'])}</td><td>{_f(r['true'])}</td><td>{_f(r.get('read'))}</td>"
+        f"<td>{_f(r.get('error'), '+.1f')}</td><td>{_f(r.get('C'), '.3f')}</td><td>{_f(r.get('S'), '.3f')}</td>"
+        f"<td>{_f(r.get('H'), '.2f')}</td></tr>"
+        for r in report["gauges"])
+    return (
+        "<!doctype html><html><head><meta charset=\"utf-8\">"
+        f"<title>Gauge-reading baseline: {e(report['dataset'])}</title>"
+        "<style>body{font-family:sans-serif;max-width:1100px}td,th{padding:3px 7px;border-bottom:1px solid #ccc;"
+        "font-size:90%}</style></head><body>"
+        f"<h1>Gauge-reading baseline on dataset {e(report['dataset'])}</h1>"
+        "<p>What the dataset is for: every frame carries the true level of every dial it shows, so a gauge "
+        "reader can be scored against the conditions it was taken in. This baseline is the study's reader: "
+        "on the dial's projected box (the ROI) it takes the dark pixels (V &le; 80) of the dial face, finds "
+        "the ray from the pivot along which they run, and turns that angle into a level through the inverse "
+        "of the gauge's level &rarr; angle binding. Error = read &minus; true, in % of the level. "
+        f"Dials narrower than {report['min_dial_px']} px, or not wholly in the frame, are counted, not scored; "
+        "a scored dial is unreadable when its face shows no dark pixel (glare), too many (night, shadow) "
+        "or none along one ray. C, S: the study's RMS contrast and share of grey levels above 240 on the ROI; "
+        "H: the pointer's dark-pixel row extent on the face over the true extent of the pointer's projected "
+        "outline in the same frame (1: the whole pointer and nothing else; H true = 1).</p>"
+        f"<h2>Error by condition</h2><table>{head}{body}</table>"
+        "<h2>Against sun elevation</h2>"
+        f"<img src=\"{e(report['plots']['sun'])}\" alt=\"reading error and H against sun elevation\">"
+        "<h2>Against local time</h2>"
+        f"<img src=\"{e(report['plots']['time'])}\" alt=\"reading error and H against local time\">"
+        f"<h2>Every gauge seen</h2><table>{gauge_head}{gauge_rows}</table></body></html>\n")
