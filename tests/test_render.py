@@ -2,6 +2,7 @@
 labels, determinism and the study table need the built sample: test_sample.py."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -63,12 +64,138 @@ def test_ray_box_and_blocking():
     assert not study._ray_hits_box(np.array([-5.0, 0.0, 3.0]), np.array([1.0, 0.0, 0.0]), 10.0, pose, lo, hi)
 
 
-def test_veil_needs_the_sun_in_front_and_visible():
-    axis = np.array([0.0, 1.0, 0.0])
+WIDE = pinhole.intrinsics(1.047, 320, 240)  # 1x: the sun's disc is ~1.4 px across
+TELE = pinhole.intrinsics(1.047 / 45, 320, 240)  # the study's 45x close-up
+FORWARD = pinhole.look_at((0.0, 0.0, 1.6), (0.0, 50.0, 1.6))  # looks north, level
+
+
+def sun_through(k, u, v, pose=FORWARD):
+    """The ENU direction whose ray passes through pixel position (u, v)."""
+    ray = np.array([(u - k["cx"]) / k["fx"], -(v - k["cy"]) / k["fy"], -1.0])
+    return pose[:3, :3] @ (ray / np.linalg.norm(ray))
+
+
+def test_halo_holds_the_glare_fraction_and_falls_as_a_power_law():
     cam = sensor.PhoneCamera()
-    assert sensor.veil_radiance(axis, axis, 800.0, True, cam) == pytest.approx(cam.veil_k * 800.0)
-    assert sensor.veil_radiance(-axis, axis, 800.0, True, cam) == 0.0
-    assert sensor.veil_radiance(axis, axis, 800.0, False, cam) == 0.0
+    theta = np.geomspace(1e-8, math.pi / 2, 400001)
+    f = 2 * math.pi * np.sin(theta) * sensor.halo_psf(theta, cam)
+    assert float(np.sum((f[1:] + f[:-1]) * np.diff(theta)) / 2) == pytest.approx(cam.glare_fraction, rel=1e-3)
+    p = sensor.halo_psf(np.array([0.1, 0.2]), cam)
+    assert p[0] / p[1] == pytest.approx(2 ** cam.glare_slope, rel=0.01)  # theta^-g beyond the shoulder
+
+
+def test_a_sun_in_the_frame_saturates_a_disc_around_it_not_the_frame():
+    cam = sensor.PhoneCamera(denoise=0.0)
+    scene = np.full((240, 320, 3), 8.0)  # W/m2/sr: a sunlit yard
+    gain = 0.4 / 8.0  # metered on the scene without the sun: the sun does not move it
+    veil = sensor.lens_glare(scene, gain, np.ones(3), FORWARD, WIDE, sun_through(WIDE, 80.5, 60.5), 800.0, cam)
+    rgb = sensor.develop(scene, gain, veil, None, cam)
+    yy, xx = np.mgrid[0:240, 0:320]
+    near = np.hypot(xx + 0.5 - 80.5, yy + 0.5 - 60.5) < 10.0
+    assert (rgb[near] == 255).all()  # the disc and its halo's core saturate
+    far = rgb[200:, 280:]  # the far corner: lifted a little, far from the clip
+    assert far.max() < 200 and far.min() >= sensor.develop(scene[:1, :1], gain, 0.0, None, cam).min()
+    assert (rgb == 255).all(axis=-1).mean() < 0.1
+    # The halo falls off across the frame: brighter at 40 px than at 120 px from the sun.
+    assert veil[60, 120, 0] > 3 * veil[60, 200, 0] > 0
+
+
+def test_a_sun_behind_the_camera_set_or_occluded_adds_nothing():
+    cam = sensor.PhoneCamera()
+    behind = -sun_through(WIDE, 160.0, 120.0)
+    assert not sensor.sun_glare(behind, 800.0, FORWARD, WIDE, cam).any()
+    beside = np.array([1.0, -0.01, 0.0]) / math.hypot(1.0, 0.01)  # just behind the lens plane
+    assert not sensor.sun_glare(beside, 800.0, FORWARD, WIDE, cam).any()
+    in_view = sun_through(WIDE, 160.0, 120.0)
+    assert sensor.sun_glare(in_view, 800.0, FORWARD, WIDE, cam).max() > 1e3
+    assert not sensor.sun_glare(in_view, 0.0, FORWARD, WIDE, cam).any()  # occluded or set: the caller's dni 0
+
+
+@pytest.mark.parametrize("k, beyond_px", [(WIDE, 30.0), (TELE, 300.0), (TELE, 2300.0)])
+def test_a_sun_just_outside_the_frame_lights_the_near_edge_more(k, beyond_px):
+    cam = sensor.PhoneCamera()
+    g = sensor.sun_glare(sun_through(k, 320.0 + beyond_px, 120.0), 350.0, FORWARD, k, cam)
+    near, far = g[:, -1].mean(), g[:, 0].mean()
+    assert near > 1.05 * far > 0.0
+    assert np.all(np.diff(g[120]) > 0)  # rising towards the sun along the row through it
+
+
+def test_sensor_noise_is_seeded_and_grows_with_the_signal():
+    cam = sensor.PhoneCamera(denoise=0.0)
+    flat = np.full((200, 200, 3), 1.0)
+    a, b = (sensor.sensor_noise(flat * 0.4, 1.0, cam, seed) for seed in (7, 7))
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, sensor.sensor_noise(flat * 0.4, 1.0, cam, 8))
+    full_scale = cam.full_well_e * cam.burst_frames  # base ISO: a daylight gain
+    for level in (0.05, 0.4):
+        var = float(np.var(sensor.sensor_noise(flat * level, 0.01, cam, 3) - level))
+        expected = (level * full_scale + cam.read_noise_e**2 * cam.burst_frames) / full_scale**2
+        assert var == pytest.approx(expected, rel=0.03)  # Poisson: variance proportional to the electrons
+    night = float(np.var(sensor.sensor_noise(flat * 0.05, cam.gain_max, cam, 3) - 0.05))
+    assert night > 30 * float(np.var(sensor.sensor_noise(flat * 0.05, 0.01, cam, 3) - 0.05))  # analog gain
+    # Through develop: the seed decides the picture; no seed, no noise.
+    scene = np.full((48, 64, 3), 0.2)
+    assert np.array_equal(sensor.develop(scene, 1.0, 0.0, None, cam, seed=1),
+                          sensor.develop(scene, 1.0, 0.0, None, cam, seed=1))
+    assert not np.array_equal(sensor.develop(scene, 1.0, 0.0, None, cam, seed=1),
+                              sensor.develop(scene, 1.0, 0.0, None, cam, seed=2))
+    assert len(np.unique(sensor.develop(scene, 1.0, 0.0, None, cam))) == 1
+
+
+DEVELOP_SCRIPT = """
+import hashlib, sys
+import numpy as np
+from pipeline.runtime.render import pinhole, sensor
+k = pinhole.intrinsics(1.047 / 45, 320, 240)
+pose = pinhole.look_at((0.0, 0.0, 1.6), (0.0, 50.0, 1.6))
+scene = np.random.default_rng(5).random((240, 320, 3)) * 16.0
+scene[100:104, 50:54] = 5e4  # a glint above the clip: the scene's own halo
+sun = pose[:3, :3] @ np.array([0.05, 0.03, -1.0]) / np.linalg.norm([0.05, 0.03, -1.0])
+veil = sensor.lens_glare(scene, 0.05, np.array([1.1, 1.0, 0.9]), pose, k, sun, 350.0, sensor.PhoneCamera())
+rgb = sensor.develop(scene, 0.05, veil, np.array([1.1, 1.0, 0.9]), sensor.PhoneCamera(), seed=11)
+print(hashlib.sha256(veil.tobytes() + rgb.tobytes()).hexdigest())
+"""
+
+
+def test_develop_is_the_same_bytes_in_another_process():
+    """Glare (FFT convolutions), noise and the ISP: a function of the inputs and seed."""
+    import subprocess
+    import sys
+
+    here = {}
+    exec(compile(DEVELOP_SCRIPT.replace("print(", "here['sha'] = ("), "develop", "exec"), {"here": here})
+    there = subprocess.run([sys.executable, "-c", DEVELOP_SCRIPT], capture_output=True, text=True, timeout=120,
+                           cwd=Path(__file__).resolve().parent.parent)
+    assert there.returncode == 0, there.stderr[-2000:]
+    assert there.stdout.strip() == here["sha"]
+
+
+STUDY_TOML = (Path(__file__).resolve().parent.parent / "sources" / "study.toml").read_text()
+
+
+@pytest.mark.parametrize("old, new, key", [
+    ('zoom = 45.0', 'zoom = "far"', "zoom"),
+    ('zoom = 45.0', 'zoom = 450.0', "zoom"),
+    ('target = "RE-B3"', '', "target"),
+    ('time = "17:05"', 'time = "5 pm"', "conditions[2].time"),
+    ('name = "midnight"', 'name = "solar_noon"', "conditions[4].name"),
+    ('faces_sun_of = "late_afternoon"', 'faces_sun_of = "dusk"', "faces_sun_of"),
+    ('seed = 20250920', 'seed = 20250920\nsede = 1', "sede"),
+    ('seed = 20250920', 'seed = -1', "seed"),
+    ('zoom = 45.0', 'zoom = 45.0 45', None),  # TOML syntax
+])
+def test_a_bad_study_toml_is_one_error_naming_the_file_and_key(tmp_path, old, new, key):
+    from pipeline.errors import UserError
+
+    assert old in STUDY_TOML
+    path = tmp_path / "study.toml"
+    path.write_text(STUDY_TOML.replace(old, new, 1))
+    with pytest.raises(UserError) as e:
+        study.load_study(path)
+    text = str(e.value)
+    assert "\n" not in text and text.startswith(str(path))
+    assert key is None or f"{path}: {key}:" in text
+    assert study.load_study(Path(__file__).resolve().parent.parent / "sources" / "study.toml").target == "RE-B3"
 
 
 def test_pointer_angle_follows_binding():
