@@ -74,8 +74,8 @@ def animate(data: bytes, tag: str, run) -> tuple[bytes, list[str]]:
         effects = {bo.binding["effect"] for bo in seq[0].outputs}
         mats = glb.to_y_up(np.array([v.transform for v in seq]))
         if "rotate" in effects:
-            channel(node, "rotation", glb.to_gltf_rotation(continuous_quaternions(quaternions_from_matrices(mats))),
-                    "VEC4")
+            rotations = continuous_quaternions(quaternions_from_matrices(mats))
+            channel(node, "rotation", glb.to_gltf_rotation(rotations), "VEC4")
         if "translate" in effects:
             channel(node, "translation", np.array([m[:3, 3] for m in mats]), "VEC3")
         if "scale" in effects:
