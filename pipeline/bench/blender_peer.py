@@ -68,9 +68,9 @@ def blender_section(ctx: Context) -> dict:
     a = run_script("assemble", str(built), str(work), str(repeats), timeout=ctx.pick(300.0, 600.0))
     if "timeout_s" in a:
         raise RuntimeError(f"Blender's glTF export of the whole scene did not finish in {a['timeout_s']:.0f} s")
-    # Blender's USD export of the sample took > 5 min and > 8 GB here: capped (the cap
-    # includes opening the assembled .blend), and a timeout is recorded as the figure
-    # it is; a higher cap only spends the bench's 20 minutes on a known answer
+    # Blender's USD export of the sample runs for minutes and takes gigabytes: capped
+    # (the cap includes opening the assembled .blend), and a timeout is recorded as the
+    # figure it is; a higher cap only spends the bench's budget on a known answer
     u = run_script("usd", a["blend"], str(work), timeout=ctx.pick(120.0, 150.0))
     ctx.shared["blender_glb"] = a["file"]
     ours = {p.suffix: p for p in sorted((built / "scene").iterdir()) if p.suffix in (".glb", ".usda")}
@@ -84,8 +84,8 @@ def blender_section(ctx: Context) -> dict:
         "assemble_s": a["assemble_s"], "export_gltf": summarize(a["export_s"]), "blender_glb_bytes": a["bytes"],
         "export_gltf_maxrss_bytes": a["maxrss_bytes"],
         "ours_bytes": {p.name: _size(p) for p in ours.values()},
-        # one fresh-process load per file: the differences are 3-30x, far above this
-        # machine's noise, and three rounds of the monolithic files cost 8 minutes
+        # one fresh-process load per file: the differences between the files are far
+        # above the machine's noise, and more rounds of the monolithic files cost minutes
         "loads": _loads(files, 1),
     }
     if "timeout_s" in u:

@@ -15,7 +15,7 @@ duplicate of its object tree per placement (objects share mesh data, as Alt+D do
 at the placement's ENU pose from scene/placements.json, plus the terrain; then time
 `export_scene.gltf` (GLB) of the whole scene, and save it as a .blend for `usd`.
 usd: open that .blend and time `wm.usd_export` of the whole scene (its own process:
-Blender's USD export of the sample took > 5 min and > 8 GB, so the driver caps it
+Blender's USD export of the sample runs for minutes and takes gigabytes, so the driver caps it
 without losing the glTF figures, and without assembling the scene again).
 load: a fresh Blender imports FILE (glTF or USD, default options); seconds and this
 process's peak RSS (`load none` gives bpy's own baseline).

@@ -83,7 +83,7 @@ def gazebo_section(ctx: Context) -> dict:
            "world": {k: seen["world"][k] for k in ("parse_s", "peak_rss_mb", "models", "links", "visuals", "collisions")},
            "budget": {"peak_rss_mb": gazebo.WORLD_PARSE_BUDGET_MB, "parse_s": gazebo.WORLD_PARSE_BUDGET_S},
            "physics": seen.get("physics", {})}
-    if not ctx.quick:  # 6 GB and half a minute: the full run only
+    if not ctx.quick:  # gigabytes and most of a minute: the full run only
         before = gazebo.probe_world(_includes_world(ctx.work / "includes.sdf", record), [models], meshes=False)
         out["one_include_per_placement"] = {k: before["world"][k] for k in out["world"]}
     out["per_placement"] = _placement_costs(ctx, models, record)

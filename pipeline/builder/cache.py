@@ -14,8 +14,8 @@ cache's only user removes the least recently used entries and memo files until t
 cache is within its limit (`--cache-limit`), never an entry its own build folder
 holds. Use is recorded as the mtime of an entry's meta.json and of a memo file,
 renewed when either is used, so a CI job that restores the folder keeps what its
-builds still use. Sizing the cache takes a walk over every file in it (0.05-0.2 s
-for the sample's thousands), so the walk leaves its total in USAGE_FILE, every
+builds still use. Sizing the cache takes a walk over every file in it (thousands
+for the sample), so the walk leaves its total in USAGE_FILE, every
 entry and memo file stored after adds its bytes there (`add_usage`: an upper bound,
 links counted whole), and a build walks the cache again only when that total is
 over the limit.
@@ -38,7 +38,7 @@ from ..files import atomic_path, atomic_write
 CACHE_FOLDER = ".cache"  # in the build folder, unless a build is given another (--cache)
 USERS_FILE = ".users"  # locked shared by every build using the cache
 USAGE_FILE = ".usage"  # bytes: the last walk's total plus what was stored since (add_usage)
-DEFAULT_LIMIT = 2 << 30  # bytes: the sample's cold build stores about 0.3 GB
+DEFAULT_LIMIT = 2 << 30  # bytes: room for several cold builds of the sample
 MEMO_FOLDER = "memo"  # where builder.memo keeps its entries
 
 

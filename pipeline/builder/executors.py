@@ -160,7 +160,7 @@ def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: in
     address-space limit (Workers.memory), inherited by the processes its tasks start.
     bpy is imported by the first read of a .blend in a worker, not here: a worker that
     reads none (the source, geometry and package tasks of an edit's chain) never pays
-    its 0.45 s."""
+    for it."""
     global _CPUS, _OWN_CPU, _EXIT_FIRST
     if memory is not None:
         import resource
@@ -179,8 +179,8 @@ def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: in
         os.environ.setdefault(name, str(threads))
     os.environ[SHARE_VARIABLE] = str(threads)  # tasks may run two parts side by side (fork_join.beside)
     # Kept after bpy's own exit handler (run_task), so it runs first: Blender's exit
-    # clean-up costs a quarter of a second per worker, and tearing down the
-    # interpreter's modules a tenth without it, and the build waits for both. By then
+    # clean-up and the teardown of the interpreter's modules are time every worker
+    # spends at exit, and the build waits for both. By then
     # the worker has handed back every result (multiprocessing flushes its queues
     # before). Only in a worker: a main process keeps its exit code.
     import multiprocessing
@@ -194,8 +194,7 @@ def _hold_to(cores: int) -> None:
     """A pool worker whose task has one core keeps to a CPU of its own, and one with
     more to all of the build's. fcpw splits each query batch over a thread per CPU it
     sees: two workers' threads spread over both CPUs wait on each other's stragglers
-    at the end of every batch (shunt_reactor's and power_transformer's LOD searches
-    side by side: 3.80 and 6.54 s unpinned, 3.27 and 6.26 s each on its own CPU)."""
+    at the end of every batch."""
     if _CPUS is None or _OWN_CPU is None or len(_CPUS) < 2:
         return
     os.sched_setaffinity(0, (_OWN_CPU,) if cores <= 1 else _CPUS)

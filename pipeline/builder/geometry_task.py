@@ -9,8 +9,8 @@ from pathlib import Path
 from .. import config
 from .layout import ir_path, source_path
 
-# what build_geometry imports (mostly inside functions): 0.22-0.25 s in a fresh worker,
-# and jsonschema (0.08 s) for asset.toml's check
+# what build_geometry imports (mostly inside functions), and jsonschema for asset.toml's
+# check: an idle worker imports them ahead
 WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
         "pipeline.findings", "pipeline.fork_join", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
 

@@ -11,8 +11,8 @@ from .. import config, ir
 from ..digest import sha256_file
 from .layout import ir_path
 
-# what build_asset imports (mostly inside functions): 0.20-0.22 s in a fresh worker,
-# and jsonschema (0.06-0.08 s) for asset.toml's check
+# what build_asset imports (mostly inside functions), and jsonschema for asset.toml's
+# check: an idle worker imports them ahead
 WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.export.package", "pipeline.export.collada",
         "pipeline.export.gltf", "pipeline.export.usd", "pipeline.export.sdf", "pipeline.export.thumbnail",
         "pipeline.export.manifest", "pipeline.validate.checks", "collada", "lxml.etree", "PIL.Image",

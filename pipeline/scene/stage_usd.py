@@ -69,8 +69,8 @@ def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, pla
     terrain = Sdf.PrimSpec(site, "Terrain", Sdf.SpecifierDef, "Xform")
     terrain.referenceList.Prepend(Sdf.Reference(_reference(terrain_model)))
 
-    # a prim spec and three attribute specs a placement (31,480 at the bench's 10x
-    # plan): the loop keeps to what Sdf needs, the numbers converted for all at once
+    # a prim spec and three attribute specs a placement, tens of thousands on a large
+    # plan: the loop keeps to what Sdf needs, the numbers converted for all at once
     op_order = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
     double3, double, tokens = Sdf.ValueTypeNames.Double3, Sdf.ValueTypeNames.Double, Sdf.ValueTypeNames.TokenArray
     varying, uniform = Sdf.VariabilityVarying, Sdf.VariabilityUniform

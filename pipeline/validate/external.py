@@ -39,7 +39,7 @@ _COLLADA_HINT = "pip install pycollada lxml (project dependencies: reinstall the
 _SDFORMAT_LIBRARY = "libsdformat12.so.12"
 _GLTF_MODULE = Path(__file__).resolve().parents[2] / "tools" / "node_modules" / "gltf-validator"
 _TIMEOUT_S = 300
-# Loading the COLLADA schema costs ~0.3 s; keep one validator per thread (a validator's
+# Loading the COLLADA schema is slow: keep one validator per thread (a validator's
 # error log is per instance, so threads must not share one).
 _LOCAL = threading.local()
 # One schema compiled at a time. lxml finds the resolver that serves the schema's import
@@ -126,12 +126,10 @@ def _run_sdf_check(name: str, cmd: list[str], path: Path, env: dict) -> External
                           lines if not ok else (), _SDF_HINT)
 
 
-# sdformat 12 builds a fresh copy of its whole spec for every <include> it loads, and a
-# world's check grows faster than its includes (measured here: 7 MB and 35-40 ms an
-# include of junction_box, 18 MB and 60 ms of circuit_breaker). The sample's world (788
-# includes) took 92 s and 12.5 GB in one `ign sdf -k`; in parts of 64, 32 and 16
-# includes, two at a time, 29.2 s / 4.0 GB, 27.1 s / 2.4 GB and 29.6 s / 1.8 GB (time /
-# peak of the process tree). A world with more includes than this is checked in parts.
+# sdformat 12 builds a fresh copy of its whole spec for every <include> it loads, so a
+# world's check grows faster than its includes, in time and in memory: a world with
+# more includes than this is checked in parts (the size that keeps both low on the
+# sample: the figures are in 1bd9b89's message).
 WORLD_PART_INCLUDES = 32
 # Where one top-level element of a world names another's frame (inside a model, names
 # are the model's own).
@@ -145,7 +143,7 @@ def ign_sdf_world(path: Path, sdf_path: list[Path], part_includes: int = WORLD_P
     """ign_sdf on what sdformat must see of a world (_reduce_world: of the includes and
     of the placements grouped in models that repeat one another's form, one of each),
     in parts of at most `part_includes` includes when it has more, so that memory
-    stays bounded (2.4 GB for two parts at once on the sample) and the check's time
+    stays bounded and the check's time
     grows with the forms, not with the placements.
 
     Each part is that world with only its own share of the includes: every other
