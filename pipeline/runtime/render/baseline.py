@@ -1,12 +1,10 @@
 """`twin baseline DATASET`: the study's gauge reader over a dataset's conditions.
 
-For every gauge a frame labels visible: the ROI is the box of the dial's projected rim
-(the study's crop), C and S are the study's metrics on it and the pointer extent its H
-numerator on the dial face alone (frames.measure); the reader turns the face's dark
-pixels (the study's V <= 80) into the pointer's angle on the dial plane and, through
-the inverse of the binding's level -> angle map, into a level, scored against the
-frame's true reading. A dial narrower than MIN_DIAL_PX, or not wholly in the frame, is
-counted and not scored.
+Every gauge a frame labels visible is read by gauge_reader (the ROI of the dial's
+projected rim, the study's C, S and H on it, the level the reader infers) and scored
+against the frame's true reading; the report bins the errors by sun elevation (night,
+0-10, 10-30, above 30 deg) and plots them against sun elevation and local time:
+OUT/reports/baseline_<name>.json and .html, the plots' PNGs beside them.
 
 H's reference. The study divides the extent by the first frame's (H_ref): one camera,
 one pointer angle, so the ratio follows the view's loss alone. A dataset changes the
@@ -16,171 +14,24 @@ in the same frame (its authored outline at the true angle, projected with the fr
 K and pose): H is then the study's H over H_true with a perfect reference, 1 when the
 metric finds the whole pointer and nothing else, below when darkness or glare hides
 it, above when shadows or a dark face add rows. H_true is 1 by construction.
-
-The dial comes from the placement's pointer binding (its rest pose and axis), so every
-bound dial is read where it is, the transformers' too.
 """
 
 from __future__ import annotations
 
 import datetime as dt
+import html
+import io
 import json
-import math
-from dataclasses import dataclass
+import os
 from pathlib import Path
 
 import numpy as np
 
 from ...errors import UserError
-from .gauge import DIAL_RADIUS, FACE_RADIUS, POINTER
-from .pinhole import project
+from ...files import atomic_write
+from .gauge_reader import MIN_DIAL_PX, NOT_SCORED, STATUS_READ, UNREADABLE, Dial, dial_of, score_gauge
 
-MIN_DIAL_PX = 24  # the face's projected minor axis below which a dial is counted, not read
-DARK_V = 80  # the study's pointer threshold on V (HSV, 0..255)
-MAX_DARK_SHARE = 0.25  # a face darker than this is night or shadow, not a pointer
-FACE_SHARE = 0.97  # the face inside the bezel's shadowed rim (study.face_only's disc)
-SPAN = (0.2, 0.8)  # the stretch of the pointer the reader follows, in face radii (the tip is at 0.85)
-SPAN_BINS = 8
-MIN_COVER = 6  # of SPAN_BINS: how much of the span one ray's dark pixels must cover
-CANDIDATES = 360  # pointer directions tried, one a degree
-POINTER_HALF_WIDTH_M = 0.006  # the pointer's half width along the followed span, about
-
-# The authored pointer (sources/authoring/_parts.py pointer_mesh), in its own frame:
-# along +Y from a hub 3 cm behind the pivot to 0.85 of the face radius, 4 mm thick
-# along the axis. Its projected row extent is the true H numerator.
-POINTER_OUTLINE = np.array([(-0.012, -0.03), (0.012, -0.03), (0.002, 0.85 * FACE_RADIUS), (-0.002, 0.85 * FACE_RADIUS)])
-POINTER_THICKNESS_M = 0.004
-
-STATUS_READ = "read"
-NOT_SCORED = ("too_small", "cut")  # counted, not scored
-UNREADABLE = ("no_pointer", "dark_face", "no_line")
-
-
-@dataclass(frozen=True)
-class Dial:
-    """A dial in the world: the pointer's pivot, the plane it turns in and its binding.
-    up: the pointer's direction at angle 0; left = axis x up, its direction at +90 deg
-    (the binding turns it about `axis`, right-handed). centre, axis, up, left: (3,)."""
-
-    centre: np.ndarray
-    axis: np.ndarray
-    up: np.ndarray
-    left: np.ndarray
-    binding: dict
-
-    def direction(self, angle: float) -> np.ndarray:
-        return math.cos(angle) * self.up + math.sin(angle) * self.left
-
-
-def dial_of(placement_pose: np.ndarray, manifest: dict) -> Dial | None:
-    """The dial of a placement whose manifest binds POINTER to a rotation, or None."""
-    b = next((r for r in manifest.get("bindings", []) if r["target"] == POINTER and r["effect"] == "rotate"), None)
-    if b is None:
-        return None
-    link = next((np.array(r["pose"], float).reshape(4, 4) for r in manifest.get("links", [])
-                 if r["name"] == b.get("link")), np.eye(4))
-    rest = np.array(b.get("rest_pose") or np.eye(4).reshape(16), float).reshape(4, 4)
-    world = placement_pose @ link @ rest
-    a = np.asarray(b["axis"], float)
-    a /= np.linalg.norm(a)
-    y0 = np.array([0.0, 1.0, 0.0]) - a[1] * a  # the pointer's rest direction, in the turning plane
-    y0 /= np.linalg.norm(y0)
-    r = world[:3, :3]
-    axis, up = r @ a, r @ y0
-    return Dial(world[:3, 3].copy(), axis, up, np.cross(axis, up), b)
-
-
-def level_of_angle(angle: float, binding: dict) -> float:
-    """The inverse of gauge.pointer_angle: the level (clamped to the domain) whose
-    pointer angle is `angle` (rad, taken within a turn of the range's middle)."""
-    (d0, d1), (r0, r1) = binding["domain"], binding["range"]
-    mid = (r0 + r1) / 2.0
-    a = mid + (angle - mid + math.pi) % (2.0 * math.pi) - math.pi
-    x = d0 + (d1 - d0) * (a - r0) / (r1 - r0)
-    return float(min(max(x, min(d0, d1)), max(d0, d1)))
-
-
-# --- geometry of one view (pure numpy) ---------------------------------------------------
-
-
-def dial_plane_coordinates(dial: Dial, cam_pose: np.ndarray, k: dict, box: tuple[int, int, int, int]) -> np.ndarray:
-    """(h, w, 2) float64: where each pixel centre of `box` (x0, y0, x1, y1) sees the
-    dial's plane, as (left, up) metres from the pivot; NaN where the ray misses it."""
-    x0, y0, x1, y1 = box
-    cols, rows = np.meshgrid(np.arange(x0, x1) + 0.5, np.arange(y0, y1) + 0.5)
-    rays = np.stack([(cols - k["cx"]) / k["fx"], -(rows - k["cy"]) / k["fy"], -np.ones_like(cols)], axis=-1)
-    rays = rays @ cam_pose[:3, :3].T
-    eye = cam_pose[:3, 3]
-    denom = rays @ dial.axis
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((dial.centre - eye) @ dial.axis) / denom
-    hit = eye + t[..., None] * rays - dial.centre
-    out = np.stack([hit @ dial.left, hit @ dial.up], axis=-1)
-    out[~(t > 0)] = np.nan
-    return out
-
-
-def circle(dial: Dial, radius: float, n: int = 64) -> np.ndarray:
-    """(n, 3) world points on a circle of `radius` about the pivot in the dial's plane."""
-    a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
-    return dial.centre + radius * (np.cos(a)[:, None] * dial.up + np.sin(a)[:, None] * dial.left)
-
-
-def minor_axis_px(uv: np.ndarray) -> float:
-    """The minor axis (px) of the ellipse through (n, 2) points spread evenly in angle
-    on a projected circle: the variance along an axis of half-length b is b^2 / 2."""
-    if np.isnan(uv).any():
-        return 0.0
-    lam = np.linalg.eigvalsh(np.cov(uv.T))
-    return float(2.0 * math.sqrt(2.0 * max(lam[0], 0.0)))
-
-
-def pointer_rows_px(dial: Dial, angle: float, cam_pose: np.ndarray, k: dict) -> float:
-    """Row extent (px) of the pointer's outline at `angle`, projected: the true H numerator."""
-    along, across = dial.direction(angle), dial.direction(angle - math.pi / 2.0)
-    flat = dial.centre + POINTER_OUTLINE[:, :1] * across + POINTER_OUTLINE[:, 1:] * along
-    pts = np.vstack([flat, flat + POINTER_THICKNESS_M * dial.axis])
-    v = project(pts, cam_pose, k)[:, 1]
-    return float(np.nanmax(v) - np.nanmin(v)) if not np.isnan(v).all() else 0.0
-
-
-# --- the reader ----------------------------------------------------------------------------
-
-
-def read_angle(dark: np.ndarray, plane: np.ndarray, face_radius: float, pixel_m: float) -> tuple[float | None, str]:
-    """The pointer's angle (rad, 0 along the dial's up, positive towards its left) from
-    the face pixels' darkness, or (None, why): `no_pointer` (nothing dark: glare),
-    `dark_face` (too much dark: night, shadow), `no_line` (dark pixels, but no ray
-    from the pivot along which they cover the pointer's span).
-
-    dark: (n,) bool; plane: (n, 2) (left, up) metres of the same face pixels;
-    pixel_m: one pixel's size on the dial (m), the reader's tolerance across a ray.
-    Each candidate ray scores the share of the span's bins its nearby dark pixels
-    cover; the best ray's pixels give the angle of their mean position."""
-    if not dark.any():
-        return None, "no_pointer"
-    if dark.mean() > MAX_DARK_SHARE:
-        return None, "dark_face"
-    p = plane[dark]
-    theta = np.arange(CANDIDATES) * (2.0 * math.pi / CANDIDATES)
-    dirs = np.stack([np.sin(theta), np.cos(theta)], axis=1)  # (left, up) of each candidate
-    along = p @ dirs.T  # (m, CANDIDATES)
-    across = np.abs(p[:, :1] * dirs[:, 1] - p[:, 1:] * dirs[:, 0])
-    lo, hi = SPAN[0] * face_radius, SPAN[1] * face_radius
-    near = (along >= lo) & (along < hi) & (across <= POINTER_HALF_WIDTH_M + pixel_m)
-    pix, cand = np.nonzero(near)
-    bins = np.minimum(((along[pix, cand] - lo) / (hi - lo) * SPAN_BINS).astype(int), SPAN_BINS - 1)
-    cover = np.zeros((CANDIDATES, SPAN_BINS), bool)
-    cover[cand, bins] = True
-    score = cover.sum(axis=1) * (len(p) + 1) + near.sum(axis=0)  # span covered, then pixels
-    best = int(np.argmax(score))
-    if cover[best].sum() < MIN_COVER:
-        return None, "no_line"
-    mean = p[near[:, best]].mean(axis=0)
-    return float(math.atan2(mean[0], mean[1])), STATUS_READ
-
-
-# --- one gauge of one frame ------------------------------------------------------------------
+# --- a dataset ------------------------------------------------------------------------------------
 
 
 def camera_of(frame: dict) -> tuple[np.ndarray, dict]:
@@ -190,48 +41,6 @@ def camera_of(frame: dict) -> tuple[np.ndarray, dict]:
     k = {"fx": kmat[0, 0], "fy": kmat[1, 1], "cx": kmat[0, 2], "cy": kmat[1, 2],
          "width": int(c["width"]), "height": int(c["height"])}
     return np.asarray(c["pose"], float), k
-
-
-def score_gauge(bgr: np.ndarray, dial: Dial, cam_pose: np.ndarray, k: dict, truth: float | None) -> dict:
-    """The ROI, C, S, pointer extent, H and the reader's level of one dial in one image
-    (bgr: (h, w, 3) uint8). `status`: read, one of UNREADABLE, or one of NOT_SCORED."""
-    from .frames import measure
-
-    face_uv = project(circle(dial, FACE_RADIUS), cam_pose, k)
-    rim_uv = project(circle(dial, DIAL_RADIUS), cam_pose, k)
-    row = {"dial_px": round(minor_axis_px(face_uv), 3)}
-    if np.isnan(rim_uv).any():
-        return {**row, "status": "cut"}
-    lo, hi = rim_uv.min(axis=0), rim_uv.max(axis=0)
-    if lo[0] < 0 or lo[1] < 0 or hi[0] > k["width"] or hi[1] > k["height"]:
-        return {**row, "status": "cut"}
-    if row["dial_px"] < MIN_DIAL_PX:
-        return {**row, "status": "too_small"}
-    box = (int(math.floor(lo[0])), int(math.floor(lo[1])), int(math.ceil(hi[0])), int(math.ceil(hi[1])))
-    crop = bgr[box[1]:box[3], box[0]:box[2]]
-    plane = dial_plane_coordinates(dial, cam_pose, k, box)
-    face = np.nan_to_num(np.hypot(plane[..., 0], plane[..., 1]), nan=np.inf) <= FACE_SHARE * FACE_RADIUS
-    face_only = crop.copy()
-    face_only[~face] = 128  # neither red, white nor dark for the H masks (study.face_only)
-    m = measure(crop, face_only)
-    true_angle = _true_angle(dial, truth)
-    true_rows = pointer_rows_px(dial, true_angle, cam_pose, k) if true_angle is not None else None
-    dark = crop[face].max(axis=1) <= DARK_V  # HSV's V is the largest of B, G, R
-    angle, status = read_angle(dark, plane[face], FACE_RADIUS, 2.0 * FACE_RADIUS / row["dial_px"])
-    reading = level_of_angle(angle, dial.binding) if angle is not None else None
-    return {**row, "status": status, "roi": list(box), "C": m["C"], "S": m["S"], "extent_px": m["extent_px"],
-            "true_extent_px": true_rows, "H": m["extent_px"] / true_rows if true_rows else None,
-            "angle_rad": angle, "true_angle_rad": true_angle, "read": reading,
-            "error": reading - truth if reading is not None and truth is not None else None}
-
-
-def _true_angle(dial: Dial, truth: float | None) -> float | None:
-    from .gauge import pointer_angle
-
-    return None if truth is None else pointer_angle(truth, dial.binding)
-
-
-# --- a dataset ------------------------------------------------------------------------------------
 
 
 def read_frames(folder: Path) -> list[dict]:
@@ -281,11 +90,12 @@ def run_baseline(folder, out=None, *, sources: Path | None = None) -> Path:
     """`twin baseline`: score the dataset at `folder` (OUT/datasets/<name>/) and write
     OUT/reports/baseline_<name>.json, .html and its plots; OUT defaults to the build
     the dataset lies in. Returns the HTML's path."""
-    from .baseline_report import write_report
     from .site import load_site
 
-    folder = Path(folder)
-    build = folder.resolve().parents[1]
+    folder = Path(folder).resolve()
+    if not (folder / "frames.jsonl").is_file():
+        raise UserError(folder, None, "not a dataset folder (no frames.jsonl): give OUT/datasets/<name>/")
+    build = folder.parents[1] if len(folder.parents) > 1 else folder
     if not (build / "scene" / "placements.json").is_file():
         raise UserError(folder, None, "a dataset folder lies in a build: OUT/datasets/<name>/ beside OUT/scene/")
     site = load_site(build, sources)
@@ -293,3 +103,157 @@ def run_baseline(folder, out=None, *, sources: Path | None = None) -> Path:
     name = json.loads((folder / "dataset.json").read_text())["dataset"] if (folder / "dataset.json").is_file() \
         else folder.name
     return write_report(Path(out) if out else build, name, folder, rows)
+
+
+# --- the bins ------------------------------------------------------------------------------------
+
+# (name, the highest sun elevation it holds, deg): each bin starts above the one before
+BINS = (("night (sun <= 0 deg)", 0.0), ("sun 0-10 deg", 10.0), ("sun 10-30 deg", 30.0), ("sun > 30 deg", 90.0))
+
+
+def bin_of(elevation_deg: float) -> str:
+    return next((name for name, top in BINS if elevation_deg <= top), BINS[-1][0])
+
+
+def _mean(values) -> float | None:
+    values = [v for v in values if v is not None]
+    return float(np.mean(values)) if values else None
+
+
+def summary(rows: list[dict]) -> dict:
+    """Counts and errors of a set of gauge rows: seen (labelled visible), not scored
+    (too small, cut), scored, read; the share read among the scored; the mean
+    absolute reading error of those read; H's mean and mean |H - 1| over the scored."""
+    scored = [r for r in rows if r["status"] not in NOT_SCORED]
+    read = [r for r in scored if r["status"] == STATUS_READ]
+    hs = [r["H"] for r in scored if r.get("H") is not None]
+    return {"seen": len(rows), "too_small": sum(r["status"] == "too_small" for r in rows),
+            "cut": sum(r["status"] == "cut" for r in rows), "scored": len(scored), "read": len(read),
+            "unreadable": {why: sum(r["status"] == why for r in scored) for why in UNREADABLE},
+            "share_read": len(read) / len(scored) if scored else None,
+            "mae": _mean(abs(r["error"]) for r in read),
+            "max_abs_error": max((abs(r["error"]) for r in read), default=None),
+            "mean_H": _mean(hs), "mae_H": _mean(abs(h - 1.0) for h in hs)}
+
+
+def bins_table(rows: list[dict]) -> list[dict]:
+    out = [{"bin": name, **summary([r for r in rows if bin_of(r["sun_elevation_deg"]) == name])}
+           for name, _ in BINS]
+    return out + [{"bin": "all", **summary(rows)}]
+
+
+# --- plots ------------------------------------------------------------------------------------------
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _png(fig) -> bytes:
+    """PNG bytes without the Software stamp: the same rows give the same file."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
+    _plt().close(fig)
+    return buf.getvalue()
+
+
+def plot(rows: list[dict], key: str, label: str, marks: tuple[float, ...]) -> bytes:
+    """|reading error| (top) and H (bottom) of the scored gauges against rows[key];
+    the unreadable ones as red crosses on the top plot's upper edge."""
+    plt = _plt()
+    scored = [r for r in rows if r["status"] not in NOT_SCORED]
+    read = [r for r in scored if r["status"] == STATUS_READ]
+    lost = [r for r in scored if r["status"] != STATUS_READ]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 5.6), sharex=True)
+    ceiling = max([abs(r["error"]) for r in read] + [10.0]) * 1.15
+    top.scatter([r[key] for r in read], [abs(r["error"]) for r in read], s=18, color="C0", label="read")
+    if lost:
+        top.scatter([r[key] for r in lost], [ceiling] * len(lost), marker="x", color="C3", s=24,
+                    label="unreadable")
+    top.set_ylim(0.0, ceiling * 1.08)
+    top.set_ylabel("|reading error| (% level)")
+    top.legend(loc="upper left", fontsize=8)
+    with_h = [r for r in scored if r.get("H") is not None]
+    bottom.scatter([r[key] for r in with_h], [r["H"] for r in with_h], s=18,
+                   c=["C0" if r["status"] == STATUS_READ else "C3" for r in with_h])
+    bottom.axhline(1.0, color="grey", lw=0.8, ls="--")
+    bottom.set_ylabel("H (extent / true extent)")
+    bottom.set_xlabel(label)
+    for ax in (top, bottom):
+        for x in marks:
+            ax.axvline(x, color="grey", lw=0.6, ls=":")
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _png(fig)
+
+
+# --- the report ---------------------------------------------------------------------------------------
+
+
+def write_report(out: Path, name: str, folder: Path, rows: list[dict]) -> Path:
+    reports = out / "reports"
+    reports.mkdir(parents=True, exist_ok=True)
+    plots = {"sun": f"baseline_{name}_sun.png", "time": f"baseline_{name}_time.png"}
+    atomic_write(reports / plots["sun"], plot(rows, "sun_elevation_deg", "sun elevation (deg)",
+                                              tuple(top for _, top in BINS[:-1])))
+    atomic_write(reports / plots["time"], plot(rows, "local_hours", "local time (h)", ()))
+    report = {"dataset": name, "min_dial_px": MIN_DIAL_PX, "bins": bins_table(rows), "gauges": rows,
+              "plots": plots, "frames_with_gauges": len({r["frame_id"] for r in rows})}
+    atomic_write(reports / f"baseline_{name}.json", json.dumps(report, sort_keys=True, indent=1, allow_nan=False) + "\n")
+    images = Path(os.path.relpath(folder.resolve(), reports.resolve()))
+    atomic_write(reports / f"baseline_{name}.html", _html(report, images))
+    return reports / f"baseline_{name}.html"
+
+
+def _f(x, spec: str = ".1f") -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def _html(report: dict, images: Path) -> str:
+    e = html.escape
+    head = ("<tr><th>condition</th><th>gauges seen</th><th>too small</th><th>cut by the frame</th><th>scored</th>"
+            "<th>read</th><th>share read</th><th>MAE (% level)</th><th>max |error|</th><th>mean H</th>"
+            "<th>mean |H - 1|</th><th>unreadable: no pointer / dark face / no line</th></tr>")
+    body = "".join(
+        f"<tr><td>{e(b['bin'])}</td><td>{b['seen']}</td><td>{b['too_small']}</td><td>{b['cut']}</td>"
+        f"<td>{b['scored']}</td><td>{b['read']}</td><td>{_f(b['share_read'], '.0%')}</td><td>{_f(b['mae'])}</td>"
+        f"<td>{_f(b['max_abs_error'])}</td><td>{_f(b['mean_H'], '.2f')}</td><td>{_f(b['mae_H'], '.2f')}</td>"
+        f"<td>{' / '.join(str(b['unreadable'][w]) for w in UNREADABLE)}</td></tr>"
+        for b in report["bins"])
+    gauge_head = ("<tr><th>frame</th><th>tag</th><th>camera</th><th>local time</th><th>sun el (deg)</th>"
+                  "<th>dial (px)</th><th>status</th><th>true %</th><th>read %</th><th>error</th><th>C</th><th>S</th>"
+                  "<th>H</th></tr>")
+    gauge_rows = "".join(
+        f"<tr><td><a href=\"{e((images / r['image']).as_posix())}\">{e(r['frame_id'])}</a></td><td>{e(r['tag'])}</td>"
+        f"<td>{e(str(r['camera']))}</td><td>{e(r['local_time'])}</td><td>{r['sun_elevation_deg']:.1f}</td>"
+        f"<td>{r['dial_px']:.0f}</td><td>{e(r['status'])}</td><td>{_f(r['true'])}</td><td>{_f(r.get('read'))}</td>"
+        f"<td>{_f(r.get('error'), '+.1f')}</td><td>{_f(r.get('C'), '.3f')}</td><td>{_f(r.get('S'), '.3f')}</td>"
+        f"<td>{_f(r.get('H'), '.2f')}</td></tr>"
+        for r in report["gauges"])
+    return (
+        "<!doctype html><html><head><meta charset=\"utf-8\">"
+        f"<title>Gauge-reading baseline: {e(report['dataset'])}</title>"
+        "<style>body{font-family:sans-serif;max-width:1100px}td,th{padding:3px 7px;border-bottom:1px solid #ccc;"
+        "font-size:90%}</style></head><body>"
+        f"<h1>Gauge-reading baseline on dataset {e(report['dataset'])}</h1>"
+        "<p>What the dataset is for: every frame carries the true level of every dial it shows, so a gauge "
+        "reader can be scored against the conditions it was taken in. This baseline is the study's reader: "
+        "on the dial's projected box (the ROI) it takes the dark pixels (V &le; 80) of the dial face, finds "
+        "the ray from the pivot along which they run, and turns that angle into a level through the inverse "
+        "of the gauge's level &rarr; angle binding. Error = read &minus; true, in % of the level. "
+        f"Dials narrower than {report['min_dial_px']} px, or not wholly in the frame, are counted, not scored; "
+        "a scored dial is unreadable when its face shows no dark pixel (glare), too many (night, shadow) "
+        "or none along one ray. C, S: the study's RMS contrast and share of grey levels above 240 on the ROI; "
+        "H: the pointer's dark-pixel row extent on the face over the true extent of the pointer's projected "
+        "outline in the same frame (1: the whole pointer and nothing else; H true = 1).</p>"
+        f"<h2>Error by condition</h2><table>{head}{body}</table>"
+        "<h2>Against sun elevation</h2>"
+        f"<img src=\"{e(report['plots']['sun'])}\" alt=\"reading error and H against sun elevation\">"
+        "<h2>Against local time</h2>"
+        f"<img src=\"{e(report['plots']['time'])}\" alt=\"reading error and H against local time\">"
+        f"<h2>Every gauge seen</h2><table>{gauge_head}{gauge_rows}</table></body></html>\n")

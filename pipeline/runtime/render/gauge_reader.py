@@ -1,0 +1,202 @@
+"""The study's gauge reader on one dial of one image: the dial from its placement's
+pointer binding, the ROI from its projected rim, the study's C, S and pointer extent
+(frames.measure) on it, and the level the reader infers: the ray from the pivot along
+which the face's dark pixels (the study's V <= 80) run, mapped through the inverse of
+the binding's level -> angle map. A dial narrower than MIN_DIAL_PX, or not wholly in the
+frame, is counted and not scored. The dial comes from the binding's rest pose and axis,
+so every bound dial is read where it is, the transformers' too.
+
+H is the pointer's dark-pixel row extent over its true projected row extent in the
+same view (baseline.py says why this reference).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
+from .pinhole import project
+
+MIN_DIAL_PX = 24  # the face's projected minor axis below which a dial is counted, not read
+DARK_V = 80  # the study's pointer threshold on V (HSV, 0..255)
+MAX_DARK_SHARE = 0.25  # a face darker than this is night or shadow, not a pointer
+FACE_SHARE = 0.97  # the face inside the bezel's shadowed rim (study.face_only's disc)
+SPAN = (0.2, 0.8)  # the stretch of the pointer the reader follows, in face radii (the tip is at 0.85)
+SPAN_BINS = 8
+MIN_COVER = 6  # of SPAN_BINS: how much of the span one ray's dark pixels must cover
+CANDIDATES = 360  # pointer directions tried, one a degree
+POINTER_HALF_WIDTH_M = 0.006  # the pointer's half width along the followed span, about
+
+# The authored pointer (sources/authoring/_parts.py pointer_mesh), in its own frame:
+# along +Y from a hub 3 cm behind the pivot to 0.85 of the face radius, 4 mm thick
+# along the axis. Its projected row extent is the true H numerator.
+POINTER_OUTLINE = np.array([(-0.012, -0.03), (0.012, -0.03), (0.002, 0.85 * FACE_RADIUS), (-0.002, 0.85 * FACE_RADIUS)])
+POINTER_THICKNESS_M = 0.004
+
+STATUS_READ = "read"
+NOT_SCORED = ("too_small", "cut")  # counted, not scored
+UNREADABLE = ("no_pointer", "dark_face", "no_line")
+
+
+@dataclass(frozen=True)
+class Dial:
+    """A dial in the world: the pointer's pivot, the plane it turns in and its binding.
+    up: the pointer's direction at angle 0; left = axis x up, its direction at +90 deg
+    (the binding turns it about `axis`, right-handed). centre, axis, up, left: (3,)."""
+
+    centre: np.ndarray
+    axis: np.ndarray
+    up: np.ndarray
+    left: np.ndarray
+    binding: dict
+
+    def direction(self, angle: float) -> np.ndarray:
+        return math.cos(angle) * self.up + math.sin(angle) * self.left
+
+
+def dial_of(placement_pose: np.ndarray, manifest: dict) -> Dial | None:
+    """The dial of a placement whose manifest binds POINTER to a rotation, or None."""
+    b = next((r for r in manifest.get("bindings", []) if r["target"] == POINTER and r["effect"] == "rotate"), None)
+    if b is None:
+        return None
+    link = next((np.array(r["pose"], float).reshape(4, 4) for r in manifest.get("links", [])
+                 if r["name"] == b.get("link")), np.eye(4))
+    rest = np.array(b.get("rest_pose") or np.eye(4).reshape(16), float).reshape(4, 4)
+    world = placement_pose @ link @ rest
+    a = np.asarray(b["axis"], float)
+    a /= np.linalg.norm(a)
+    y0 = np.array([0.0, 1.0, 0.0]) - a[1] * a  # the pointer's rest direction, in the turning plane
+    y0 /= np.linalg.norm(y0)
+    r = world[:3, :3]
+    axis, up = r @ a, r @ y0
+    return Dial(world[:3, 3].copy(), axis, up, np.cross(axis, up), b)
+
+
+def level_of_angle(angle: float, binding: dict) -> float:
+    """The inverse of gauge.pointer_angle: the level (clamped to the domain) whose
+    pointer angle is `angle` (rad, taken within a turn of the range's middle)."""
+    (d0, d1), (r0, r1) = binding["domain"], binding["range"]
+    mid = (r0 + r1) / 2.0
+    a = mid + (angle - mid + math.pi) % (2.0 * math.pi) - math.pi
+    x = d0 + (d1 - d0) * (a - r0) / (r1 - r0)
+    return float(min(max(x, min(d0, d1)), max(d0, d1)))
+
+
+# --- geometry of one view (pure numpy) ---------------------------------------------------
+
+
+def dial_plane_coordinates(dial: Dial, cam_pose: np.ndarray, k: dict, box: tuple[int, int, int, int]) -> np.ndarray:
+    """(h, w, 2) float64: where each pixel centre of `box` (x0, y0, x1, y1) sees the
+    dial's plane, as (left, up) metres from the pivot; NaN where the ray misses it."""
+    x0, y0, x1, y1 = box
+    cols, rows = np.meshgrid(np.arange(x0, x1) + 0.5, np.arange(y0, y1) + 0.5)
+    rays = np.stack([(cols - k["cx"]) / k["fx"], -(rows - k["cy"]) / k["fy"], -np.ones_like(cols)], axis=-1)
+    rays = rays @ cam_pose[:3, :3].T
+    eye = cam_pose[:3, 3]
+    denom = rays @ dial.axis
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((dial.centre - eye) @ dial.axis) / denom
+    hit = eye + t[..., None] * rays - dial.centre
+    out = np.stack([hit @ dial.left, hit @ dial.up], axis=-1)
+    out[~(t > 0)] = np.nan
+    return out
+
+
+def circle(dial: Dial, radius: float, n: int = 64) -> np.ndarray:
+    """(n, 3) world points on a circle of `radius` about the pivot in the dial's plane."""
+    a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+    return dial.centre + radius * (np.cos(a)[:, None] * dial.up + np.sin(a)[:, None] * dial.left)
+
+
+def minor_axis_px(uv: np.ndarray) -> float:
+    """The minor axis (px) of the ellipse through (n, 2) points spread evenly in angle
+    on a projected circle: the variance along an axis of half-length b is b^2 / 2."""
+    if np.isnan(uv).any():
+        return 0.0
+    lam = np.linalg.eigvalsh(np.cov(uv.T))
+    return float(2.0 * math.sqrt(2.0 * max(lam[0], 0.0)))
+
+
+def pointer_rows_px(dial: Dial, angle: float, cam_pose: np.ndarray, k: dict) -> float:
+    """Row extent (px) of the pointer's outline at `angle`, projected: the true H numerator."""
+    along, across = dial.direction(angle), dial.direction(angle - math.pi / 2.0)
+    flat = dial.centre + POINTER_OUTLINE[:, :1] * across + POINTER_OUTLINE[:, 1:] * along
+    pts = np.vstack([flat, flat + POINTER_THICKNESS_M * dial.axis])
+    v = project(pts, cam_pose, k)[:, 1]
+    return float(np.nanmax(v) - np.nanmin(v)) if not np.isnan(v).all() else 0.0
+
+
+# --- the reader ----------------------------------------------------------------------------
+
+
+def read_angle(dark: np.ndarray, plane: np.ndarray, face_radius: float, pixel_m: float) -> tuple[float | None, str]:
+    """The pointer's angle (rad, 0 along the dial's up, positive towards its left) from
+    the face pixels' darkness, or (None, why): `no_pointer` (nothing dark: glare),
+    `dark_face` (too much dark: night, shadow), `no_line` (dark pixels, but no ray
+    from the pivot along which they cover the pointer's span).
+
+    dark: (n,) bool; plane: (n, 2) (left, up) metres of the same face pixels;
+    pixel_m: one pixel's size on the dial (m), the reader's tolerance across a ray.
+    Each candidate ray scores the share of the span's bins its nearby dark pixels
+    cover; the best ray's pixels give the angle of their mean position."""
+    if not dark.any():
+        return None, "no_pointer"
+    if dark.mean() > MAX_DARK_SHARE:
+        return None, "dark_face"
+    p = plane[dark]
+    theta = np.arange(CANDIDATES) * (2.0 * math.pi / CANDIDATES)
+    dirs = np.stack([np.sin(theta), np.cos(theta)], axis=1)  # (left, up) of each candidate
+    along = p @ dirs.T  # (m, CANDIDATES)
+    across = np.abs(p[:, :1] * dirs[:, 1] - p[:, 1:] * dirs[:, 0])
+    lo, hi = SPAN[0] * face_radius, SPAN[1] * face_radius
+    near = (along >= lo) & (along < hi) & (across <= POINTER_HALF_WIDTH_M + pixel_m)
+    pix, cand = np.nonzero(near)
+    bins = np.minimum(((along[pix, cand] - lo) / (hi - lo) * SPAN_BINS).astype(int), SPAN_BINS - 1)
+    cover = np.zeros((CANDIDATES, SPAN_BINS), bool)
+    cover[cand, bins] = True
+    score = cover.sum(axis=1) * (len(p) + 1) + near.sum(axis=0)  # span covered, then pixels
+    best = int(np.argmax(score))
+    if cover[best].sum() < MIN_COVER:
+        return None, "no_line"
+    mean = p[near[:, best]].mean(axis=0)
+    return float(math.atan2(mean[0], mean[1])), STATUS_READ
+
+
+# --- one gauge of one frame ------------------------------------------------------------------
+
+
+def score_gauge(bgr: np.ndarray, dial: Dial, cam_pose: np.ndarray, k: dict, truth: float | None) -> dict:
+    """The ROI, C, S, pointer extent, H and the reader's level of one dial in one image
+    (bgr: (h, w, 3) uint8). `status`: read, one of UNREADABLE, or one of NOT_SCORED."""
+    from .frames import measure
+
+    face_uv = project(circle(dial, FACE_RADIUS), cam_pose, k)
+    rim_uv = project(circle(dial, DIAL_RADIUS), cam_pose, k)
+    row = {"dial_px": round(minor_axis_px(face_uv), 3)}
+    if np.isnan(rim_uv).any():
+        return {**row, "status": "cut"}
+    lo, hi = rim_uv.min(axis=0), rim_uv.max(axis=0)
+    if lo[0] < 0 or lo[1] < 0 or hi[0] > k["width"] or hi[1] > k["height"]:
+        return {**row, "status": "cut"}
+    if row["dial_px"] < MIN_DIAL_PX:
+        return {**row, "status": "too_small"}
+    box = (int(math.floor(lo[0])), int(math.floor(lo[1])), int(math.ceil(hi[0])), int(math.ceil(hi[1])))
+    crop = bgr[box[1]:box[3], box[0]:box[2]]
+    plane = dial_plane_coordinates(dial, cam_pose, k, box)
+    face = np.nan_to_num(np.hypot(plane[..., 0], plane[..., 1]), nan=np.inf) <= FACE_SHARE * FACE_RADIUS
+    face_only = crop.copy()
+    face_only[~face] = 128  # neither red, white nor dark for the H masks (study.face_only)
+    m = measure(crop, face_only)
+    true_angle = None if truth is None else pointer_angle(truth, dial.binding)
+    true_rows = pointer_rows_px(dial, true_angle, cam_pose, k) if true_angle is not None else None
+    dark = crop[face].max(axis=1) <= DARK_V  # HSV's V is the largest of B, G, R
+    angle, status = read_angle(dark, plane[face], FACE_RADIUS, 2.0 * FACE_RADIUS / row["dial_px"])
+    reading = level_of_angle(angle, dial.binding) if angle is not None else None
+    return {**row, "status": status, "roi": list(box), "C": m["C"], "S": m["S"], "extent_px": m["extent_px"],
+            "true_extent_px": true_rows, "H": m["extent_px"] / true_rows if true_rows else None,
+            "angle_rad": angle, "true_angle_rad": true_angle, "read": reading,
+            "error": reading - truth if reading is not None and truth is not None else None}
+
