@@ -65,21 +65,27 @@ def cull(items: list[dict], pose: np.ndarray, k: dict, near: float, far: float,
     """Items ({'centre', 'radius', ...}, world bounding spheres) that the camera sees or
     whose shadow can fall into what it sees: the sphere, swept `shadow_m` away from the
     sun, touches the frustum. Sampling the sweep every half radius (at least 1 m) is
-    enough for a conservative sphere test."""
+    enough for a conservative sphere test. All spheres and sweep points are tested at
+    once: a dataset plans hundreds of frames against the whole site."""
+    if not items:
+        return []
     planes = _frustum_planes(pose, k, near, far)
-    keep = []
-    for it in items:
-        c, rad = np.asarray(it["centre"], float), float(it["radius"])
-        sweep = [0.0]
-        if sun_dir is not None and sun_dir[2] > 0:
-            step = max(1.0, rad / 2)
-            sweep = list(np.arange(0.0, shadow_m + step, step))
-        for t in sweep:
-            p = c - (sun_dir * t if t else 0.0)
-            if all(n @ p + d >= -rad for n, d in planes):
-                keep.append(it)
-                break
-    return keep
+    normals = np.array([n for n, _ in planes])  # (6, 3)
+    offsets = np.array([d for _, d in planes])  # (6,)
+    centres = np.array([np.asarray(it["centre"], float) for it in items])  # (n, 3)
+    radii = np.array([float(it["radius"]) for it in items])
+    if sun_dir is not None and sun_dir[2] > 0:
+        steps = np.maximum(1.0, radii / 2)
+        counts = np.ceil((shadow_m + steps) / steps).astype(int)  # len(np.arange(0, shadow_m + step, step))
+        j = np.arange(counts.max())
+        t = j[None, :] * steps[:, None]  # (n, m) distances along the sweep
+        valid = j[None, :] < counts[:, None]
+        points = centres[:, None, :] - t[..., None] * np.asarray(sun_dir, float)
+    else:
+        valid = np.ones((len(items), 1), bool)
+        points = centres[:, None, :]
+    inside = ((points @ normals.T + offsets) >= -radii[:, None, None]).all(axis=-1) & valid
+    return [it for it, hit in zip(items, inside.any(axis=1)) if hit]
 
 
 # --- the scene as the runtime sees it -----------------------------------------------------
