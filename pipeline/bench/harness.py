@@ -23,7 +23,7 @@ from .stats import machine
 
 
 def _sections(results: dict):
-    from . import blender_peer, builds, gazebo, gltf_transform, sections, viewer
+    from . import blender_peer, builds, dataset, gazebo, gltf_transform, sections, viewer
 
     return [
         ("build", builds.build_section),
@@ -34,6 +34,7 @@ def _sections(results: dict):
         ("runtime", sections.runtime_section),
         ("sun", lambda ctx: sections.sun_section(ctx, results.get("runtime", {}).get("data"))),
         ("render", sections.render_section),
+        ("dataset", dataset.dataset_section),
         ("blender", blender_peer.blender_section),
         ("blender_reexport", blender_peer.reexport_section),
         ("gltf_transform", gltf_transform.gltf_transform_section),

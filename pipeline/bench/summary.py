@@ -35,7 +35,24 @@ def rows(sections: dict) -> list[dict]:
     out += _render_rows(data.get("render"))
     out += _gazebo_rows(data.get("gazebo"))
     out += _viewer_rows(data.get("viewer"))
+    out += _dataset_rows(data.get("dataset"))
     return [r for r in out if r is not None]
+
+
+def _dataset_rows(d):
+    """Seconds per labelled frame: dask against the local pool at the same worker count,
+    two workers against one, and our scene kept between frames against the study's
+    import-and-render per frame."""
+    if not d or "runs" not in d:
+        return []
+    r = d["runs"]
+    note = f"{d['frame']}, {r['local_1']['frames']} frames of {d['config']}"
+    return [_row("dataset", "s per frame, dask 2 workers", r["dask_2"]["seconds_per_frame"],
+                 r["local_2"]["seconds_per_frame"], "s", "local pool, 2 workers", note),
+            _row("dataset", "s per frame, 2 workers", r["local_2"]["seconds_per_frame"],
+                 r["local_1"]["seconds_per_frame"], "s", "1 worker", note),
+            _row("dataset", "s per frame, scene kept", r["local_1"]["seconds_per_frame"],
+                 r["per_frame"]["seconds_per_frame"], "s", "the study's method: import and render per frame", note)]
 
 
 def _viewer_rows(d):

@@ -1,0 +1,84 @@
+"""The dataset section: seconds per labelled frame (render, develop, instance and
+depth passes, annotations, files) of the shipped dataset config at 640x480, the
+same frames rendered side by side by:
+
+- local_1, local_2: the local executor with one and two worker processes;
+- dask_1, dask_2:   dask.distributed (a LocalCluster) with one and two workers;
+- per_frame:        the study's own method: a fresh Blender per frame that imports
+                    the scene's packages again and renders once (one worker replaced
+                    after every frame).
+
+Each run starts from an empty dataset folder; every run's files must be byte-identical
+to local_1's (recorded). The quick mode renders 2 frames at 160x120."""
+
+from __future__ import annotations
+
+import json
+import re
+import statistics
+import time
+from pathlib import Path
+
+from .context import Context
+
+CONFIG = Path("datasets") / "inspection_route.toml"
+RUNS = (("local_1", "local", 1, None), ("local_2", "local", 2, None), ("dask_1", "dask", 1, None),
+        ("dask_2", "dask", 2, None), ("per_frame", "local", 1, 1))
+
+
+def _config(source: Path, dst: Path, frames: int, width: int, height: int, tasks_per_worker: int | None) -> Path:
+    """The shipped config with `frames` frames at width x height (and, for the per-frame
+    run, a worker replaced after every frame)."""
+    text = source.read_text()
+    text = re.sub(r"(?m)^count = \d+", f"count = {frames}", text)
+    text = re.sub(r"(?m)^width = \d+", f"width = {width}", text)
+    text = re.sub(r"(?m)^height = \d+", f"height = {height}", text)
+    if tasks_per_worker is not None:
+        text = re.sub(r"(?m)^tasks_per_worker = \d+", f"tasks_per_worker = {tasks_per_worker}", text)
+    dst.write_text(text)
+    return dst
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and p.name not in ("timings.json", "dataset.json")}
+
+
+def dataset_section(ctx: Context) -> dict:
+    from ..runtime.render.dataset import run_dataset
+
+    built = ctx.built or ctx.out
+    source = ctx.sources / CONFIG
+    if not source.is_file() or not (built / "scene" / "placements.json").is_file():
+        return {"skipped": f"no {CONFIG} in these sources, or no built scene"}
+    frames = ctx.pick(2, 8)
+    width, height = ctx.pick((160, 120), (640, 480))
+    runs, reference = {}, None
+    for name, executor, workers, tasks in RUNS:
+        out = ctx.work / "dataset" / name
+        out.mkdir(parents=True)
+        for sub in ("models", "scene"):
+            (out / sub).symlink_to(built / sub)
+        config = _config(source, ctx.work / "dataset" / f"{name}.toml", frames, width, height, tasks)
+        t0 = time.perf_counter()
+        folder = run_dataset(config, out, executor=executor, workers=workers, sources=ctx.sources)
+        wall = time.perf_counter() - t0
+        timings = json.loads((folder / "timings.json").read_text())
+        files = _files(folder)
+        if reference is None:
+            reference = files
+        per_frame = sorted(timings["frame_s"])
+        runs[name] = {
+            "executor": executor, "workers": workers, "tasks_per_worker": tasks, "frames": frames,
+            "wall_s": wall, "seconds_per_frame": wall / frames, "frames_per_minute": 60.0 * frames / wall,
+            # a worker's first frame loads the scene; the rest show the steady cost
+            "first_frame_s": max(per_frame), "steady_frame_median_s": statistics.median(per_frame[:-workers] or per_frame),
+            "plan_s": timings["plan_s"], "scene_placements": timings["scene_placements"],
+            "identical_to_local_1": files == reference}
+    base = runs["local_1"]["seconds_per_frame"]
+    return {"frame": f"{width}x{height}, labels included", "config": str(CONFIG), "runs": runs,
+            "ratios": {"dask_2_to_local_2": runs["dask_2"]["seconds_per_frame"] / runs["local_2"]["seconds_per_frame"],
+                       "dask_1_to_local_1": runs["dask_1"]["seconds_per_frame"] / base,
+                       "throughput_2_to_1_workers": runs["local_2"]["frames_per_minute"]
+                       / runs["local_1"]["frames_per_minute"],
+                       "per_frame_to_local_1": runs["per_frame"]["seconds_per_frame"] / base}}
