@@ -98,6 +98,10 @@ def test_a_sun_in_the_frame_saturates_a_disc_around_it_not_the_frame():
     assert (rgb == 255).all(axis=-1).mean() < 0.1
     # The halo falls off across the frame: brighter at 40 px than at 120 px from the sun.
     assert veil[60, 120, 0] > 3 * veil[60, 200, 0] > 0
+    # At 45x the disc is resolved: its radiance is the core's share of DNI / 6.8e-5 sr.
+    disc = sensor.sun_glare(sun_through(TELE, 160.0, 120.0), 800.0, FORWARD, TELE, cam)
+    expected = (1 - cam.glare_fraction) * 800.0 / sensor.SUN_SOLID_ANGLE
+    assert disc[120, 160] == pytest.approx(expected, rel=0.05) and disc[0, 0] < expected / 100
 
 
 def test_a_sun_behind_the_camera_set_or_occluded_adds_nothing():

@@ -1,5 +1,6 @@
-"""`twin render --study`: the study's six conditions of one gauge (PAPER_NOTES.md),
-with its metrics C, S and H on the gauge's ROI."""
+"""`twin render --study`: the study's light conditions of one gauge (PAPER_NOTES.md;
+the gauge, the camera and the conditions in sources/study.toml), with its metrics C, S
+and H on the gauge's ROI, set against the shape of the study's Table 1."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import config
+from ...files import atomic_write
 from .. import camera as camera_model
 from .. import sun as sun_model
 from .frames import measure, render_shots, write_json
@@ -61,7 +63,8 @@ def load_study(path: Path | None = None) -> StudyConfig:
 
     target = data.get("target")
     if not isinstance(target, str) or not target:
-        raise UserError(path, "target", "missing: the tag of the placement whose gauge is read")
+        raise UserError(path, "target", "missing: the tag of the placement whose gauge is read" if target is None
+                        else f"{target!r}: a placement's tag (text) is expected")
     seed = data.get("seed")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise UserError(path, "seed", f"{seed!r}: a whole number >= 0 is expected")
@@ -287,7 +290,7 @@ def render_study(out, *, cam: PhoneCamera | None = None, sources: Path | None = 
               "table1_checks": sum(len(r["table1"]) for r in rows)}
     (out / "reports").mkdir(parents=True, exist_ok=True)
     write_json(out / "reports" / "study.json", report)
-    (out / "reports" / "study.html").write_text(_study_html(report))
+    atomic_write(out / "reports" / "study.html", _study_html(report))
     return out / "reports" / "study.html"
 
 
