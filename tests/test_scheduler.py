@@ -2,7 +2,6 @@
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -173,7 +172,7 @@ def test_sigkill_at_any_point_recovers(src, tmp_path, kill_after):
     for p in [out / "up" / "a.txt", out / "up" / "b.txt", out / "joined.txt"]:
         if p.exists():  # outputs are whole or absent, never half-written
             assert p.read_text() in ("ALPHA", "BETA", "ALPHA+BETA"), p
-    r = toy_graph.build(src, out)
+    toy_graph.build(src, out)
     assert (out / "joined.txt").read_text() == "ALPHA+BETA"
     assert (out / "up" / "a.txt").read_text() == "ALPHA"
     assert not _leftovers(out)

@@ -28,7 +28,6 @@ vertex of its largest mesh STEP metres along X, save it in place (no .blend1).
 from __future__ import annotations
 
 import json
-import math
 import resource
 import sys
 import time

@@ -73,7 +73,7 @@ def _plots(doc: dict) -> list[tuple[str, bytes, str]]:
 
 def write_html(doc: dict, path: Path) -> None:
     e = html.escape
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>substation-twin bench</title>",
+    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>substation-twin bench</title>",
              "<style>body{font:14px sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse}"
              "td,th{border:1px solid #ccc;padding:3px 6px;font-size:12px}.bad{color:#b00}.ok{color:#070}"
              "img{max-width:100%}</style></head><body>",

@@ -6,8 +6,6 @@ becomes an error entry.
 from __future__ import annotations
 
 import datetime as dt
-import math
-import statistics
 from pathlib import Path
 
 import numpy as np
