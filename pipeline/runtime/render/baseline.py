@@ -29,7 +29,8 @@ import numpy as np
 
 from ...errors import UserError
 from ...files import atomic_write
-from .gauge_reader import MIN_DIAL_PX, NOT_SCORED, STATUS_READ, UNREADABLE, Dial, dial_of, score_gauge
+from .gauge_reader import (DARK_OF_FACE, DARK_V, MIN_DIAL_PX, READERS, SCORED, STATUS_READ, UNREADABLE, Dial,
+                           dial_of, score_gauge)
 
 # --- a dataset ------------------------------------------------------------------------------------
 
@@ -120,19 +121,25 @@ def _mean(values) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def summary(rows: list[dict]) -> dict:
-    """Counts and errors of a set of gauge rows: seen (labelled visible), not scored
-    (too small, cut), scored, read; the share read among the scored; the mean
-    absolute reading error of those read; H's mean and mean |H - 1| over the scored."""
-    scored = [r for r in rows if r["status"] not in NOT_SCORED]
-    read = [r for r in scored if r["status"] == STATUS_READ]
-    hs = [r["H"] for r in scored if r.get("H") is not None]
-    return {"seen": len(rows), "too_small": sum(r["status"] == "too_small" for r in rows),
-            "cut": sum(r["status"] == "cut" for r in rows), "scored": len(scored), "read": len(read),
-            "unreadable": {why: sum(r["status"] == why for r in scored) for why in UNREADABLE},
-            "share_read": len(read) / len(scored) if scored else None,
+def reader_summary(scored: list[dict], reader: str) -> dict:
+    """One reader over scored rows: how many it read, the share, the mean and largest
+    absolute reading error of those read, and why it read none of the others."""
+    read = [r[reader] for r in scored if r[reader]["status"] == STATUS_READ]
+    return {"read": len(read), "share_read": len(read) / len(scored) if scored else None,
             "mae": _mean(abs(r["error"]) for r in read),
             "max_abs_error": max((abs(r["error"]) for r in read), default=None),
+            "unreadable": {why: sum(r[reader]["status"] == why for r in scored) for why in UNREADABLE}}
+
+
+def summary(rows: list[dict]) -> dict:
+    """Counts and errors of a set of gauge rows: seen (labelled visible), not scored
+    (too small, cut), scored; per reader what reader_summary says; H's mean and mean
+    |H - 1| over the scored."""
+    scored = [r for r in rows if r["status"] == SCORED]
+    hs = [r["H"] for r in scored if r.get("H") is not None]
+    return {"seen": len(rows), "too_small": sum(r["status"] == "too_small" for r in rows),
+            "cut": sum(r["status"] == "cut" for r in rows), "scored": len(scored),
+            "readers": {name: reader_summary(scored, name) for name in READERS},
             "mean_H": _mean(hs), "mae_H": _mean(abs(h - 1.0) for h in hs)}
 
 
@@ -162,25 +169,31 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
+STYLE = {"relative": ("o", "C0"), "study": ("^", "C1")}
+
+
 def plot(rows: list[dict], key: str, label: str, marks: tuple[float, ...]) -> bytes:
-    """|reading error| (top) and H (bottom) of the scored gauges against rows[key];
-    the unreadable ones as red crosses on the top plot's upper edge."""
+    """Per reader, |reading error| of the scored gauges against rows[key] (top; those
+    it could not read as crosses along the upper edge) and H (bottom)."""
     plt = _plt()
-    scored = [r for r in rows if r["status"] not in NOT_SCORED]
-    read = [r for r in scored if r["status"] == STATUS_READ]
-    lost = [r for r in scored if r["status"] != STATUS_READ]
+    scored = [r for r in rows if r["status"] == SCORED]
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 5.6), sharex=True)
-    ceiling = max([abs(r["error"]) for r in read] + [10.0]) * 1.15
-    top.scatter([r[key] for r in read], [abs(r["error"]) for r in read], s=18, color="C0", label="read")
-    if lost:
-        top.scatter([r[key] for r in lost], [ceiling] * len(lost), marker="x", color="C3", s=24,
-                    label="unreadable")
-    top.set_ylim(0.0, ceiling * 1.08)
+    errors = [abs(r[n]["error"]) for r in scored for n in READERS if r[n]["error"] is not None]
+    ceiling = max(errors + [10.0]) * 1.15
+    for i, name in enumerate(READERS):
+        marker, colour = STYLE.get(name, ("s", f"C{i + 2}"))
+        read = [r for r in scored if r[name]["status"] == STATUS_READ]
+        lost = [r for r in scored if r[name]["status"] != STATUS_READ]
+        top.scatter([r[key] for r in read], [abs(r[name]["error"]) for r in read], s=20, marker=marker,
+                    color=colour, label=f"{name}: read")
+        if lost:
+            top.scatter([r[key] for r in lost], [ceiling * (1.0 + 0.04 * i)] * len(lost), marker="x", s=22,
+                        color=colour, label=f"{name}: unreadable")
+    top.set_ylim(0.0, ceiling * 1.12)
     top.set_ylabel("|reading error| (% level)")
-    top.legend(loc="upper left", fontsize=8)
+    top.legend(loc="center left", fontsize=7)
     with_h = [r for r in scored if r.get("H") is not None]
-    bottom.scatter([r[key] for r in with_h], [r["H"] for r in with_h], s=18,
-                   c=["C0" if r["status"] == STATUS_READ else "C3" for r in with_h])
+    bottom.scatter([r[key] for r in with_h], [r["H"] for r in with_h], s=18, color="C2")
     bottom.axhline(1.0, color="grey", lw=0.8, ls="--")
     bottom.set_ylabel("H (extent / true extent)")
     bottom.set_xlabel(label)
@@ -214,43 +227,60 @@ def _f(x, spec: str = ".1f") -> str:
     return "-" if x is None else format(x, spec)
 
 
+def _reader_cells(b: dict) -> str:
+    return "".join(f"<td>{x['read']}</td><td>{_f(x['share_read'], '.0%')}</td><td>{_f(x['mae'])}</td>"
+                   f"<td>{_f(x['max_abs_error'])}</td>"
+                   f"<td>{' / '.join(str(x['unreadable'][w]) for w in UNREADABLE)}</td>"
+                   for x in (b["readers"][n] for n in READERS))
+
+
 def _html(report: dict, images: Path) -> str:
     e = html.escape
-    head = ("<tr><th>condition</th><th>gauges seen</th><th>too small</th><th>cut by the frame</th><th>scored</th>"
-            "<th>read</th><th>share read</th><th>MAE (% level)</th><th>max |error|</th><th>mean H</th>"
-            "<th>mean |H - 1|</th><th>unreadable: no pointer / dark face / no line</th></tr>")
+    per_reader = "".join(f"<th colspan=\"5\">reader: {e(n)}</th>" for n in READERS)
+    head = ("<tr><th rowspan=\"2\">condition</th><th rowspan=\"2\">gauges seen</th><th rowspan=\"2\">too small</th>"
+            "<th rowspan=\"2\">cut by the frame</th><th rowspan=\"2\">scored</th>" + per_reader +
+            "<th rowspan=\"2\">mean H</th><th rowspan=\"2\">mean |H - 1|</th></tr><tr>" +
+            "<th>read</th><th>share read</th><th>MAE (% level)</th><th>max |error|</th>"
+            "<th>unreadable: no pointer / dark face / no line</th>" * len(READERS) + "</tr>")
     body = "".join(
         f"<tr><td>{e(b['bin'])}</td><td>{b['seen']}</td><td>{b['too_small']}</td><td>{b['cut']}</td>"
-        f"<td>{b['scored']}</td><td>{b['read']}</td><td>{_f(b['share_read'], '.0%')}</td><td>{_f(b['mae'])}</td>"
-        f"<td>{_f(b['max_abs_error'])}</td><td>{_f(b['mean_H'], '.2f')}</td><td>{_f(b['mae_H'], '.2f')}</td>"
-        f"<td>{' / '.join(str(b['unreadable'][w]) for w in UNREADABLE)}</td></tr>"
+        f"<td>{b['scored']}</td>{_reader_cells(b)}<td>{_f(b['mean_H'], '.2f')}</td><td>{_f(b['mae_H'], '.2f')}</td></tr>"
         for b in report["bins"])
     gauge_head = ("<tr><th>frame</th><th>tag</th><th>camera</th><th>local time</th><th>sun el (deg)</th>"
-                  "<th>dial (px)</th><th>status</th><th>true %</th><th>read %</th><th>error</th><th>C</th><th>S</th>"
-                  "<th>H</th></tr>")
+                  "<th>dial (px)</th><th>true %</th>" + "".join(f"<th>{e(n)}: read %</th>" for n in READERS) +
+                  "<th>C</th><th>S</th><th>H</th></tr>")
+
+    def reading(r: dict, n: str) -> str:
+        if r["status"] != SCORED:
+            return e(r["status"])
+        x = r[n]
+        return f"{x['read']:.1f} ({x['error']:+.1f})" if x["status"] == STATUS_READ else e(x["status"])
+
     gauge_rows = "".join(
         f"<tr><td><a href=\"{e((images / r['image']).as_posix())}\">{e(r['frame_id'])}</a></td><td>{e(r['tag'])}</td>"
         f"<td>{e(str(r['camera']))}</td><td>{e(r['local_time'])}</td><td>{r['sun_elevation_deg']:.1f}</td>"
-        f"<td>{r['dial_px']:.0f}</td><td>{e(r['status'])}</td><td>{_f(r['true'])}</td><td>{_f(r.get('read'))}</td>"
-        f"<td>{_f(r.get('error'), '+.1f')}</td><td>{_f(r.get('C'), '.3f')}</td><td>{_f(r.get('S'), '.3f')}</td>"
-        f"<td>{_f(r.get('H'), '.2f')}</td></tr>"
+        f"<td>{r['dial_px']:.0f}</td><td>{_f(r['true'])}</td>" + "".join(f"<td>{reading(r, n)}</td>" for n in READERS) +
+        f"<td>{_f(r.get('C'), '.3f')}</td><td>{_f(r.get('S'), '.3f')}</td><td>{_f(r.get('H'), '.2f')}</td></tr>"
         for r in report["gauges"])
     return (
         "<!doctype html><html><head><meta charset=\"utf-8\">"
         f"<title>Gauge-reading baseline: {e(report['dataset'])}</title>"
-        "<style>body{font-family:sans-serif;max-width:1100px}td,th{padding:3px 7px;border-bottom:1px solid #ccc;"
+        "<style>body{font-family:sans-serif;max-width:1200px}td,th{padding:3px 7px;border-bottom:1px solid #ccc;"
         "font-size:90%}</style></head><body>"
         f"<h1>Gauge-reading baseline on dataset {e(report['dataset'])}</h1>"
         "<p>What the dataset is for: every frame carries the true level of every dial it shows, so a gauge "
-        "reader can be scored against the conditions it was taken in. This baseline is the study's reader: "
-        "on the dial's projected box (the ROI) it takes the dark pixels (V &le; 80) of the dial face, finds "
-        "the ray from the pivot along which they run, and turns that angle into a level through the inverse "
-        "of the gauge's level &rarr; angle binding. Error = read &minus; true, in % of the level. "
+        "reader can be scored against the conditions it was taken in. The baseline reads a dial the study's "
+        "way: on the dial's projected box (the ROI) it takes the dark pixels of the dial face, finds the ray "
+        "from the pivot along which they run, and turns that angle into a level through the inverse of the "
+        "gauge's level &rarr; angle binding. Two readers differ in what is dark: <b>study</b> takes the study's "
+        f"fixed V &le; {DARK_V}; <b>relative</b> takes V &le; {DARK_OF_FACE:g} of the face's median V, which "
+        "follows the phone's auto-exposure. Error = read &minus; true, in % of the level. "
         f"Dials narrower than {report['min_dial_px']} px, or not wholly in the frame, are counted, not scored; "
-        "a scored dial is unreadable when its face shows no dark pixel (glare), too many (night, shadow) "
-        "or none along one ray. C, S: the study's RMS contrast and share of grey levels above 240 on the ROI; "
-        "H: the pointer's dark-pixel row extent on the face over the true extent of the pointer's projected "
-        "outline in the same frame (1: the whole pointer and nothing else; H true = 1).</p>"
+        "a scored dial is unreadable when its face shows no dark pixel (glare), too many or too dim a face "
+        "(night, shadow), or no dark run along one ray. C, S: the study's RMS contrast and share of grey levels "
+        "above 240 on the ROI; H: the study's pointer extent (dark rows, V &le; 80) on the face over the true "
+        "row extent of the pointer's projected outline in the same frame (1: the whole pointer and nothing "
+        "else; H true = 1).</p>"
         f"<h2>Error by condition</h2><table>{head}{body}</table>"
         "<h2>Against sun elevation</h2>"
         f"<img src=\"{e(report['plots']['sun'])}\" alt=\"reading error and H against sun elevation\">"

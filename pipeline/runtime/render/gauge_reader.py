@@ -1,13 +1,18 @@
-"""The study's gauge reader on one dial of one image: the dial from its placement's
-pointer binding, the ROI from its projected rim, the study's C, S and pointer extent
-(frames.measure) on it, and the level the reader infers: the ray from the pivot along
-which the face's dark pixels (the study's V <= 80) run, mapped through the inverse of
-the binding's level -> angle map. A dial narrower than MIN_DIAL_PX, or not wholly in the
-frame, is counted and not scored. The dial comes from the binding's rest pose and axis,
-so every bound dial is read where it is, the transformers' too.
+"""Gauge readers on one dial of one image: the dial from its placement's pointer
+binding, the ROI from its projected rim, the study's C, S and pointer extent
+(frames.measure) on it, and the level a reader infers: the ray from the pivot along
+which the face's dark pixels run, mapped through the inverse of the binding's
+level -> angle map. A dial narrower than MIN_DIAL_PX, or not wholly in the frame, is
+counted and not scored. The dial comes from the binding's rest pose and axis, so every
+bound dial is read where it is, the transformers' too.
 
-H is the pointer's dark-pixel row extent over its true projected row extent in the
-same view (baseline.py says why this reference).
+Two readers differ in what "dark" is. `study`: the study's fixed V <= 80 (its H
+threshold). `relative`: V at most DARK_OF_FACE of the face's median V, which follows
+the phone's exposure: the black pointer develops to a mid grey in an auto-exposed
+frame (V about 75 to 125 in the sample's), where a fixed threshold loses it.
+
+H is the pointer's dark-pixel row extent (the study's threshold) over its true
+projected row extent in the same view (baseline.py says why this reference).
 """
 
 from __future__ import annotations
@@ -22,13 +27,17 @@ from .pinhole import project
 
 MIN_DIAL_PX = 24  # the face's projected minor axis below which a dial is counted, not read
 DARK_V = 80  # the study's pointer threshold on V (HSV, 0..255)
-MAX_DARK_SHARE = 0.25  # a face darker than this is night or shadow, not a pointer
+DARK_OF_FACE = 0.95  # the relative reader's threshold: this share of the face's median V
+MIN_FACE_V = 40  # a face whose median V is below this shows nothing to read
+MAX_DARK_SHARE = 0.5  # a face darker than this is night or shadow, not a pointer
 FACE_SHARE = 0.97  # the face inside the bezel's shadowed rim (study.face_only's disc)
 SPAN = (0.2, 0.8)  # the stretch of the pointer the reader follows, in face radii (the tip is at 0.85)
-SPAN_BINS = 8
-MIN_COVER = 6  # of SPAN_BINS: how much of the span one ray's dark pixels must cover
-CANDIDATES = 360  # pointer directions tried, one a degree
+RADII = 16  # samples along the span
+MIN_COVER = 12  # of RADII: how much of the span a ray's dark line must cover
+ANGLES = 720  # pointer directions tried, half a degree apart
 POINTER_HALF_WIDTH_M = 0.006  # the pointer's half width along the followed span, about
+MIN_RIDGE = 8.0  # V a line must lie below both its sides: a thin dark line, not a shadow's edge
+MIN_RIDGE_OF_FACE = 0.1  # ... and at least this share of the face's median V
 
 # The authored pointer (sources/authoring/_parts.py pointer_mesh), in its own frame:
 # along +Y from a hub 3 cm behind the pivot to 0.85 of the face radius, 4 mm thick
@@ -37,8 +46,10 @@ POINTER_OUTLINE = np.array([(-0.012, -0.03), (0.012, -0.03), (0.002, 0.85 * FACE
 POINTER_THICKNESS_M = 0.004
 
 STATUS_READ = "read"
+SCORED = "scored"
 NOT_SCORED = ("too_small", "cut")  # counted, not scored
 UNREADABLE = ("no_pointer", "dark_face", "no_line")
+READERS = ("relative", "study")
 
 
 @dataclass(frozen=True)
@@ -132,45 +143,69 @@ def pointer_rows_px(dial: Dial, angle: float, cam_pose: np.ndarray, k: dict) -> 
 # --- the reader ----------------------------------------------------------------------------
 
 
-def read_angle(dark: np.ndarray, plane: np.ndarray, face_radius: float, pixel_m: float) -> tuple[float | None, str]:
-    """The pointer's angle (rad, 0 along the dial's up, positive towards its left) from
-    the face pixels' darkness, or (None, why): `no_pointer` (nothing dark: glare),
-    `dark_face` (too much dark: night, shadow), `no_line` (dark pixels, but no ray
-    from the pivot along which they cover the pointer's span).
+def polar_grid(face_radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """(ANGLES,) directions (rad) and (RADII,) distances (m) from the pivot along the span."""
+    theta = np.arange(ANGLES) * (2.0 * math.pi / ANGLES)
+    return theta, np.linspace(SPAN[0] * face_radius, SPAN[1] * face_radius, RADII)
 
-    dark: (n,) bool; plane: (n, 2) (left, up) metres of the same face pixels;
-    pixel_m: one pixel's size on the dial (m), the reader's tolerance across a ray.
-    Each candidate ray scores the share of the span's bins its nearby dark pixels
-    cover; the best ray's pixels give the angle of their mean position."""
+
+def polar_values(value: np.ndarray, box: tuple[int, int, int, int], dial: Dial, cam_pose: np.ndarray,
+                 k: dict) -> np.ndarray:
+    """(ANGLES, RADII) float32: the crop's V (value: (h, w) of `box`) sampled bilinearly
+    where the dial's polar grid projects: row i is the ray at angle i."""
+    import cv2
+
+    theta, radii = polar_grid(FACE_RADIUS)
+    dirs = np.cos(theta)[:, None] * dial.up + np.sin(theta)[:, None] * dial.left
+    pts = dial.centre + (dirs[:, None, :] * radii[None, :, None]).reshape(-1, 3)
+    uv = project(pts, cam_pose, k).reshape(ANGLES, RADII, 2)
+    mx = (uv[..., 0] - box[0] - 0.5).astype(np.float32)  # pixel i's centre lies at i + 0.5
+    my = (uv[..., 1] - box[1] - 0.5).astype(np.float32)
+    return cv2.remap(np.ascontiguousarray(value, np.float32), mx, my, cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE)
+
+
+def read_angle(polar: np.ndarray, face_values: np.ndarray, threshold: float, pixel_m: float) -> tuple[float | None, str]:
+    """The pointer's angle (rad, 0 along the dial's up, positive towards its left), or
+    (None, why): `no_pointer` (no face pixel at or below `threshold`: glare),
+    `dark_face` (a dim face, or most of it dark: night, shadow), `no_line` (no ray
+    from the pivot along which a thin dark line covers the pointer's span).
+
+    polar: (ANGLES, RADII) V on the polar grid; face_values: (n,) V of the face's
+    pixels; pixel_m: one pixel's size on the dial (m). A sample is on the line when it
+    is dark and darker than both its sides (a pointer's half width and a pixel and a
+    half away) by MIN_RIDGE: a shadow's edge has one dark side. The ray whose line
+    covers the most of the span wins; the line's strength around it refines the angle."""
+    face_v = float(np.median(face_values))
+    dark = face_values <= threshold
+    if face_v < MIN_FACE_V or dark.mean() > MAX_DARK_SHARE:
+        return None, "dark_face"
     if not dark.any():
         return None, "no_pointer"
-    if dark.mean() > MAX_DARK_SHARE:
-        return None, "dark_face"
-    p = plane[dark]
-    theta = np.arange(CANDIDATES) * (2.0 * math.pi / CANDIDATES)
-    dirs = np.stack([np.sin(theta), np.cos(theta)], axis=1)  # (left, up) of each candidate
-    along = p @ dirs.T  # (m, CANDIDATES)
-    across = np.abs(p[:, :1] * dirs[:, 1] - p[:, 1:] * dirs[:, 0])
-    lo, hi = SPAN[0] * face_radius, SPAN[1] * face_radius
-    near = (along >= lo) & (along < hi) & (across <= POINTER_HALF_WIDTH_M + pixel_m)
-    pix, cand = np.nonzero(near)
-    bins = np.minimum(((along[pix, cand] - lo) / (hi - lo) * SPAN_BINS).astype(int), SPAN_BINS - 1)
-    cover = np.zeros((CANDIDATES, SPAN_BINS), bool)
-    cover[cand, bins] = True
-    score = cover.sum(axis=1) * (len(p) + 1) + near.sum(axis=0)  # span covered, then pixels
-    best = int(np.argmax(score))
-    if cover[best].sum() < MIN_COVER:
+    theta, radii = polar_grid(FACE_RADIUS)
+    step = theta[1] - theta[0]
+    offsets = np.ceil((POINTER_HALF_WIDTH_M + 1.5 * pixel_m) / radii / step).astype(int)
+    rows, cols = np.arange(ANGLES)[:, None], np.arange(RADII)[None, :]
+    ridge = np.maximum(polar[(rows - offsets) % ANGLES, cols], polar[(rows + offsets) % ANGLES, cols]) - polar
+    line = (polar <= threshold) & (ridge >= max(MIN_RIDGE, MIN_RIDGE_OF_FACE * face_v))
+    cover = line.sum(axis=1)
+    strength = np.where(line, ridge, 0.0).sum(axis=1)
+    best = int(np.argmax(cover * (strength.max() + 1.0) + strength))  # span covered, then contrast
+    if cover[best] < MIN_COVER:
         return None, "no_line"
-    mean = p[near[:, best]].mean(axis=0)
-    return float(math.atan2(mean[0], mean[1])), STATUS_READ
+    near = np.arange(-int(offsets.min()), int(offsets.min()) + 1)
+    weights = strength[(best + near) % ANGLES]
+    angle = theta[best] + step * float(near @ weights) / float(weights.sum())
+    return float((angle + math.pi) % (2.0 * math.pi) - math.pi), STATUS_READ
 
 
 # --- one gauge of one frame ------------------------------------------------------------------
 
 
 def score_gauge(bgr: np.ndarray, dial: Dial, cam_pose: np.ndarray, k: dict, truth: float | None) -> dict:
-    """The ROI, C, S, pointer extent, H and the reader's level of one dial in one image
-    (bgr: (h, w, 3) uint8). `status`: read, one of UNREADABLE, or one of NOT_SCORED."""
+    """The ROI, C, S, pointer extent, H and each reader's level of one dial in one image
+    (bgr: (h, w, 3) uint8). row["status"]: SCORED, or one of NOT_SCORED (then no reader
+    ran); row[reader] = {status: read or one of UNREADABLE, angle_rad, read, error}."""
     from .frames import measure
 
     face_uv = project(circle(dial, FACE_RADIUS), cam_pose, k)
@@ -192,11 +227,21 @@ def score_gauge(bgr: np.ndarray, dial: Dial, cam_pose: np.ndarray, k: dict, trut
     m = measure(crop, face_only)
     true_angle = None if truth is None else pointer_angle(truth, dial.binding)
     true_rows = pointer_rows_px(dial, true_angle, cam_pose, k) if true_angle is not None else None
-    dark = crop[face].max(axis=1) <= DARK_V  # HSV's V is the largest of B, G, R
-    angle, status = read_angle(dark, plane[face], FACE_RADIUS, 2.0 * FACE_RADIUS / row["dial_px"])
-    reading = level_of_angle(angle, dial.binding) if angle is not None else None
-    return {**row, "status": status, "roi": list(box), "C": m["C"], "S": m["S"], "extent_px": m["extent_px"],
-            "true_extent_px": true_rows, "H": m["extent_px"] / true_rows if true_rows else None,
-            "angle_rad": angle, "true_angle_rad": true_angle, "read": reading,
-            "error": reading - truth if reading is not None and truth is not None else None}
+    value = crop.max(axis=2)  # HSV's V is the largest of B, G, R
+    face_values = value[face]
+    out = {**row, "status": SCORED, "roi": list(box), "C": m["C"], "S": m["S"], "extent_px": m["extent_px"],
+           "true_extent_px": true_rows, "H": m["extent_px"] / true_rows if true_rows else None,
+           "true_angle_rad": true_angle, "face_v": float(np.median(face_values))}
+    polar = polar_values(value, box, dial, cam_pose, k)
+    pixel_m = 2.0 * FACE_RADIUS / row["dial_px"]
+    for name, threshold in thresholds(face_values).items():
+        angle, status = read_angle(polar, face_values, threshold, pixel_m)
+        reading = level_of_angle(angle, dial.binding) if angle is not None else None
+        out[name] = {"status": status, "angle_rad": angle, "read": reading,
+                     "error": reading - truth if reading is not None and truth is not None else None}
+    return out
 
+
+def thresholds(face_values: np.ndarray) -> dict[str, float]:
+    """Each reader's V at or below which a pixel is dark, from the face's V (n,)."""
+    return {"relative": DARK_OF_FACE * float(np.median(face_values)), "study": float(DARK_V)}
