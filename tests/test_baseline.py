@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -146,7 +147,8 @@ def _row(frame: int, elevation: float, hours: float, status: str, error: float |
     if status in bl.NOT_SCORED:
         return {**row, "status": status}
     reading = {"status": status, "angle_rad": None, "read": None if error is None else 50.0 + error, "error": error}
-    return {**row, "status": bl.SCORED, "H": h, "C": 0.2, "S": 0.0, **{n: dict(reading) for n in bl.READERS}}
+    return {**row, "status": bl.SCORED, "roi": [4, 2, 20, 18], "H": h, "C": 0.2, "S": 0.0,
+            **{n: dict(reading) for n in bl.READERS}}
 
 
 def test_report_bins_counts_and_same_bytes(tmp_path):
@@ -156,6 +158,10 @@ def test_report_bins_counts_and_same_bytes(tmp_path):
             _row(2, 5.0, 7.0, "read", 2.0, 0.9), _row(3, 20.0, 9.0, "too_small", None, None),
             _row(4, 45.0, 12.0, "read", 1.0, 1.0), _row(5, 45.0, 12.5, "no_pointer", None, 0.0)]
     folder = tmp_path / "build" / "datasets" / "toy"
+    (folder / "images").mkdir(parents=True)
+    for r in rows:
+        ok, buf = cv2.imencode(".png", np.full((24, 32, 3), 40 * int(r["frame_id"]), np.uint8))
+        (folder / r["image"]).write_bytes(buf.tobytes())
     first = write_report(tmp_path / "a", "toy", folder, rows)
     report = json.loads(first.with_suffix(".json").read_text())
     by_bin = {b["bin"]: b for b in report["bins"]}
@@ -171,8 +177,10 @@ def test_report_bins_counts_and_same_bytes(tmp_path):
     assert by_bin[BINS[2][0]]["too_small"] == 1 and by_bin[BINS[2][0]]["scored"] == 0
     html = first.read_text()
     assert "baseline_toy_sun.png" in html and "baseline_toy_time.png" in html
+    shown = [x["file"] for xs in report["examples"].values() for x in xs]
+    assert len(shown) == 5 and all(f"src=\"{f}\"" in html for f in shown)  # every scored row, in its bin
     second = write_report(tmp_path / "b", "toy", folder, rows)
-    for name in ("baseline_toy.json", "baseline_toy_sun.png", "baseline_toy_time.png"):
+    for name in ("baseline_toy.json", "baseline_toy_sun.png", "baseline_toy_time.png", shown[0]):
         a, b = (first.parent / name).read_bytes(), (second.parent / name).read_bytes()
         assert a == b, name
     assert (first.parent / "baseline_toy_sun.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

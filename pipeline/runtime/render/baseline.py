@@ -216,11 +216,39 @@ def write_report(out: Path, name: str, folder: Path, rows: list[dict]) -> Path:
                                               tuple(top for _, top in BINS[:-1])))
     atomic_write(reports / plots["time"], plot(rows, "local_hours", "local time (h)", ()))
     report = {"dataset": name, "min_dial_px": MIN_DIAL_PX, "bins": bins_table(rows), "gauges": rows,
-              "plots": plots, "frames_with_gauges": len({r["frame_id"] for r in rows})}
+              "plots": plots, "frames_with_gauges": len({r["frame_id"] for r in rows}),
+              "examples": write_examples(rows, folder, reports, f"baseline_{name}")}
     atomic_write(reports / f"baseline_{name}.json", json.dumps(report, sort_keys=True, indent=1, allow_nan=False) + "\n")
     images = Path(os.path.relpath(folder.resolve(), reports.resolve()))
     atomic_write(reports / f"baseline_{name}.html", _html(report, images))
     return reports / f"baseline_{name}.html"
+
+
+EXAMPLES_PER_BIN = 4
+EXAMPLE_HEIGHT_PX = 96
+
+
+def write_examples(rows: list[dict], folder: Path, reports: Path, stem: str) -> dict[str, list[dict]]:
+    """The first EXAMPLES_PER_BIN scored gauges of each bin as ROI crops scaled to
+    EXAMPLE_HEIGHT_PX (nearest neighbour: the pixels the readers saw) in reports/<stem>/;
+    bin -> [{file, row index}]."""
+    import cv2
+
+    out: dict[str, list[dict]] = {}
+    for name, _ in BINS:
+        picked = [i for i, r in enumerate(rows) if r["status"] == SCORED and bin_of(r["sun_elevation_deg"]) == name]
+        for i in picked[:EXAMPLES_PER_BIN]:
+            r = rows[i]
+            x0, y0, x1, y1 = r["roi"]
+            crop = cv2.imread(str(folder / r["image"]), cv2.IMREAD_COLOR)[y0:y1, x0:x1]
+            scale = EXAMPLE_HEIGHT_PX / crop.shape[0]
+            crop = cv2.resize(crop, (max(1, round(crop.shape[1] * scale)), EXAMPLE_HEIGHT_PX),
+                              interpolation=cv2.INTER_NEAREST)
+            ok, buf = cv2.imencode(".png", crop)
+            file = f"{stem}/{r['frame_id']}_{r['tag']}.png"
+            atomic_write(reports / file, buf.tobytes())
+            out.setdefault(name, []).append({"file": file, "row": i})
+    return out
 
 
 def _f(x, spec: str = ".1f") -> str:
@@ -232,6 +260,18 @@ def _reader_cells(b: dict) -> str:
                    f"<td>{_f(x['max_abs_error'])}</td>"
                    f"<td>{' / '.join(str(x['unreadable'][w]) for w in UNREADABLE)}</td>"
                    for x in (b["readers"][n] for n in READERS))
+
+
+def _gallery(report: dict, caption) -> str:
+    e = html.escape
+    rows = report["gauges"]
+    out = []
+    for name, _ in BINS:
+        shots = report["examples"].get(name, [])
+        cells = "".join(f"<figure><img src=\"{e(x['file'])}\" height=\"{EXAMPLE_HEIGHT_PX}\">"
+                        f"<figcaption>{caption(rows[x['row']])}</figcaption></figure>" for x in shots)
+        out.append(f"<h3>{e(name)}</h3><div class=\"gallery\">{cells or 'no scored dial'}</div>")
+    return "".join(out)
 
 
 def _html(report: dict, images: Path) -> str:
@@ -256,6 +296,10 @@ def _html(report: dict, images: Path) -> str:
         x = r[n]
         return f"{x['read']:.1f} ({x['error']:+.1f})" if x["status"] == STATUS_READ else e(x["status"])
 
+    def caption(r: dict) -> str:
+        return f"{r['frame_id']} {e(r['tag'])}<br>true {r['true']:.1f}" + "".join(
+            f"<br>{e(n)}: {reading(r, n)}" for n in READERS)
+
     gauge_rows = "".join(
         f"<tr><td><a href=\"{e((images / r['image']).as_posix())}\">{e(r['frame_id'])}</a></td><td>{e(r['tag'])}</td>"
         f"<td>{e(str(r['camera']))}</td><td>{e(r['local_time'])}</td><td>{r['sun_elevation_deg']:.1f}</td>"
@@ -266,7 +310,7 @@ def _html(report: dict, images: Path) -> str:
         "<!doctype html><html><head><meta charset=\"utf-8\">"
         f"<title>Gauge-reading baseline: {e(report['dataset'])}</title>"
         "<style>body{font-family:sans-serif;max-width:1200px}td,th{padding:3px 7px;border-bottom:1px solid #ccc;"
-        "font-size:90%}</style></head><body>"
+        "font-size:90%}.gallery{display:flex;flex-wrap:wrap;gap:10px}figure{margin:0;font-size:80%}</style></head><body>"
         f"<h1>Gauge-reading baseline on dataset {e(report['dataset'])}</h1>"
         "<p>What the dataset is for: every frame carries the true level of every dial it shows, so a gauge "
         "reader can be scored against the conditions it was taken in. The baseline reads a dial the study's "
@@ -286,4 +330,6 @@ def _html(report: dict, images: Path) -> str:
         f"<img src=\"{e(report['plots']['sun'])}\" alt=\"reading error and H against sun elevation\">"
         "<h2>Against local time</h2>"
         f"<img src=\"{e(report['plots']['time'])}\" alt=\"reading error and H against local time\">"
+        "<h2>What the readers saw</h2><p>The first scored dials of each condition, their ROI as the frame "
+        "holds it (true level; each reader's reading or why it has none).</p>" + _gallery(report, caption) +
         f"<h2>Every gauge seen</h2><table>{gauge_head}{gauge_rows}</table></body></html>\n")

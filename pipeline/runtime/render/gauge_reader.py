@@ -36,7 +36,7 @@ RADII = 16  # samples along the span
 MIN_COVER = 12  # of RADII: how much of the span a ray's dark line must cover
 ANGLES = 720  # pointer directions tried, half a degree apart
 POINTER_HALF_WIDTH_M = 0.006  # the pointer's half width along the followed span, about
-MIN_RIDGE = 8.0  # V a line must lie below both its sides: a thin dark line, not a shadow's edge
+MIN_RIDGE = 8.0  # V a line must lie below a side: a dark line, not a dark stretch of face
 MIN_RIDGE_OF_FACE = 0.1  # ... and at least this share of the face's median V
 
 # The authored pointer (sources/authoring/_parts.py pointer_mesh), in its own frame:
@@ -173,9 +173,11 @@ def read_angle(polar: np.ndarray, face_values: np.ndarray, threshold: float, pix
 
     polar: (ANGLES, RADII) V on the polar grid; face_values: (n,) V of the face's
     pixels; pixel_m: one pixel's size on the dial (m). A sample is on the line when it
-    is dark and darker than both its sides (a pointer's half width and a pixel and a
-    half away) by MIN_RIDGE: a shadow's edge has one dark side. The ray whose line
-    covers the most of the span wins; the line's strength around it refines the angle."""
+    is dark and darker by MIN_RIDGE than one of its sides (a pointer's half width and a
+    pixel and a half away): a shadowed stretch of face has no brighter side, and the
+    pointer's own shadow along one side leaves the other. The ray whose line covers the
+    most of the span wins (a shadow's edge crosses the rays, covering little of any
+    one); the line's strength around it refines the angle."""
     face_v = float(np.median(face_values))
     dark = face_values <= threshold
     if face_v < MIN_FACE_V or dark.mean() > MAX_DARK_SHARE:
