@@ -73,7 +73,10 @@ def call(fn, args: tuple, kwargs: dict, tasks_per_worker: int | None, memory: in
     finally:
         _FINISHED += 1
         if worn_out(_FINISHED, tasks_per_worker, memory):
-            _retire()
+            try:
+                _retire()
+            except Exception:  # noqa: BLE001 - a worker that cannot leave serves on; the call's outcome stands
+                pass
 
 
 def worn_out(finished: int, tasks_per_worker: int | None, memory: int | None) -> bool:
@@ -255,7 +258,7 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
         import dask
         from distributed import Client, LocalCluster
     except ImportError:
-        raise UserError(None, None, INSTALL_HINT) from None
+        raise UserError("--executor dask", None, INSTALL_HINT) from None
     from .executors import THREAD_VARIABLES
 
     Setup = _worker_plugin_class()
@@ -270,20 +273,20 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
         spawn = {"PYTHONHASHSEED": os.environ.get("PYTHONHASHSEED", "random")}
         with dask.config.set({**LOCAL_CONFIG, "distributed.nanny.pre-spawn-environ": spawn}):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=None, silence_logs=int(os.environ.get("TWIN_DASK_LOGS", logging.CRITICAL)),
+                                   dashboard_address=None, silence_logs=logging.CRITICAL,
                                    memory_limit=memory or 0, env=env)
         client = Client(cluster, set_as_default=False)
     else:
         try:
             client = Client(scheduler, set_as_default=False, timeout="20s")
         except (OSError, TimeoutError) as e:
-            raise UserError(None, None, f"cannot reach the dask scheduler at {scheduler}: {e}") from None
+            raise UserError("--scheduler", scheduler, f"cannot reach the dask scheduler: {e}") from None
     try:
         try:
             client.register_plugin(plugin)
         except ImportError as e:
-            raise UserError(None, None, f"a dask worker cannot import {e.name or e}: "
-                                        "install it where the workers run") from None
+            raise UserError("--executor dask", None, f"a dask worker cannot import {e.name or e}: "
+                                                     "install it where the workers run") from None
     except BaseException:
         client.close()
         if cluster is not None:
