@@ -9,7 +9,7 @@ bound dial is read where it is, the transformers' too.
 Two readers differ in what "dark" is. `study`: the study's fixed V <= 80 (its H
 threshold). `relative`: V at most DARK_OF_FACE of the face's median V, which follows
 the phone's exposure: the black pointer develops to a mid grey in an auto-exposed
-frame (V about 75 to 125 in the sample's), where a fixed threshold loses it.
+frame, often above the fixed threshold.
 
 H is the pointer's dark-pixel row extent (the study's threshold) over its true
 projected row extent in the same view (baseline.py says why this reference).
@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .frames import measure
 from .gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
 from .pinhole import project
 
@@ -127,7 +128,7 @@ def minor_axis_px(uv: np.ndarray) -> float:
     on a projected circle: the variance along an axis of half-length b is b^2 / 2."""
     if np.isnan(uv).any():
         return 0.0
-    lam = np.linalg.eigvalsh(np.cov(uv.T))
+    lam = np.linalg.eigvalsh(np.cov(uv.T, bias=True))
     return float(2.0 * math.sqrt(2.0 * max(lam[0], 0.0)))
 
 
@@ -208,8 +209,6 @@ def score_gauge(bgr: np.ndarray, dial: Dial, cam_pose: np.ndarray, k: dict, trut
     """The ROI, C, S, pointer extent, H and each reader's level of one dial in one image
     (bgr: (h, w, 3) uint8). row["status"]: SCORED, or one of NOT_SCORED (then no reader
     ran); row[reader] = {status: read or one of UNREADABLE, angle_rad, read, error}."""
-    from .frames import measure
-
     face_uv = project(circle(dial, FACE_RADIUS), cam_pose, k)
     rim_uv = project(circle(dial, DIAL_RADIUS), cam_pose, k)
     row = {"dial_px": round(minor_axis_px(face_uv), 3)}
