@@ -125,9 +125,9 @@ def gltf_poses(glb: Path) -> dict[str, tuple[np.ndarray, float]]:
 
 
 def _acc(doc, binary, index):
-    from pipeline.scene.assemble import _accessor
+    from pipeline import glb
 
-    return _accessor(doc, binary, index).astype(np.float64)
+    return glb.accessor(doc, binary, index).astype(np.float64)
 
 
 @pytest.fixture(scope="module", params=[(23.0, 6), (0.0, 6), (90.0, 4), (180.0, 6)],
