@@ -159,6 +159,33 @@ def test_a_task_whose_worker_dies_fails_alone_and_the_cluster_goes(src, tmp_path
     assert sorted(fixed.ran) == ["join", "upper:b"]
 
 
+def upper_and_limits(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:
+    """toy_graph.upper, and the limits its worker was set up with."""
+    import resource
+
+    return {**toy_graph.upper(staging, src, name, delay), "omp": os.environ.get("OMP_NUM_THREADS"),
+            "address_space": resource.getrlimit(resource.RLIMIT_AS)[0]}
+
+
+def test_workers_are_set_up_as_the_local_pools(src, tmp_path, monkeypatch):
+    """Thread variables, the address-space limit, and each one-core task on a CPU of
+    its own (a task alone on all of the build's), as executors.init_worker sets them."""
+    monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
+    out = tmp_path / "build"
+    graph = toy_graph.tasks(src, out, delay=0.05)  # both uppers run at once
+    for t in graph[:2]:
+        t.action = upper_and_limits
+    report = Scheduler(out, jobs=2, executor=dask_pool, memory_limit=5 << 30).run(graph)
+    assert not report.failed
+    a, b = (report.results[n] for n in ("upper:a", "upper:b"))
+    assert a["address_space"] == b["address_space"] == 5 << 30
+    assert a["omp"] == a["cores"] == str(max(1, min(2, os.cpu_count()) // 2))
+    usable = sorted(os.sched_getaffinity(0))
+    if len(usable) >= 2:
+        assert len(a["cpus"]) == 1 and len(b["cpus"]) == 1 and a["cpus"] != b["cpus"]
+    assert report.results["join"]["cpus"] == usable
+
+
 def test_ctrl_c_closes_the_cluster(src, tmp_path):
     """SIGINT to the build (the terminal's Ctrl-C reaches its process group) while
     tasks run: the build ends and no worker or nanny process outlives it."""

@@ -50,11 +50,14 @@ HANDOVER_SECONDS = 60.0
 
 # a LocalCluster's settings: a worker's memory beyond its limit is a restart, never a
 # pause (tasks hand back small dicts, there is nothing to spill, and a paused worker
-# whose heap stays large would hold the build forever)
+# whose heap stays large would hold the build forever); no statistical profiler,
+# which takes the GIL from the task a hundred times a second for a dashboard that
+# is not there
 LOCAL_CONFIG = {
     "distributed.worker.memory.target": False,
     "distributed.worker.memory.spill": False,
     "distributed.worker.memory.pause": False,
+    "distributed.worker.profile.enabled": False,
     "distributed.scheduler.allowed-failures": 0,
 }
 
@@ -139,20 +142,23 @@ def _worker_plugin_class():
     class Setup(WorkerPlugin):
         """What each worker does when it starts (a restarted one too): the local pool's
         set-up (executors.init_worker) when `threads` is given, then `preload`
-        imported once."""
+        imported once. `local`: the workers are this machine's, named 0..n-1 by the
+        LocalCluster, and each keeps to its own CPU on one-core tasks as a local
+        pool's worker does."""
 
         name = "twin-setup"
 
         def __init__(self, threads: int | None, cpus: tuple[int, ...], address_space: int | None,
-                     preload: tuple[str, ...]):
+                     preload: tuple[str, ...], local: bool):
             self.threads, self.cpus, self.address_space, self.preload = threads, cpus, address_space, preload
+            self.local = local
 
         def setup(self, worker):
             from .executors import init_worker
 
             if self.threads is not None:
-                slot = _Slot(worker.name) if self.cpus and isinstance(worker.name, int) else None
-                init_worker(self.threads, self.cpus, slot, self.address_space)
+                slot = _Slot(worker.name) if self.local and isinstance(worker.name, int) else None
+                init_worker(self.threads, self.cpus if self.local else (), slot, self.address_space)
             for name in self.preload:
                 importlib.import_module(name)
 
@@ -262,7 +268,7 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
     from .executors import THREAD_VARIABLES
 
     Setup = _worker_plugin_class()
-    plugin = Setup(threads, cpus if scheduler is None else (), address_space, tuple(preload))
+    plugin = Setup(threads, cpus, address_space, tuple(preload), local=scheduler is None)
     cluster = None
     if scheduler is None:
         # in the workers only: a variable the user set is kept, as in the local pool
