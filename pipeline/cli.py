@@ -180,10 +180,14 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
             workers: int):
     """Render a labelled image set (images, instance masks, depth, COCO, frames.jsonl)
     from the built scene OUT into OUT/datasets/<name>/; a stopped run resumes."""
-    from .runtime.render.dataset import run_dataset
+    from .runtime.render.dataset import dask_frames, run_dataset
 
-    folder = run_dataset(config, out, frames=frames, executor=executor, scheduler=scheduler, workers=workers,
-                         sources=sources)
+    pool = None
+    if executor == "dask":
+        from .builder.dask_executor import dask_executor
+
+        pool = dask_frames(dask_executor, scheduler)
+    folder = run_dataset(config, out, frames=frames, pool=pool, executor=executor, workers=workers, sources=sources)
     click.echo(str(folder))
 
 

@@ -30,11 +30,9 @@ def _config(source: Path, dst: Path, frames: int, width: int, height: int, tasks
     """The shipped config with `frames` frames at width x height (and, for the per-frame
     run, a worker replaced after every frame)."""
     text = source.read_text()
-    text = re.sub(r"(?m)^count = \d+", f"count = {frames}", text)
-    text = re.sub(r"(?m)^width = \d+", f"width = {width}", text)
-    text = re.sub(r"(?m)^height = \d+", f"height = {height}", text)
-    if tasks_per_worker is not None:
-        text = re.sub(r"(?m)^tasks_per_worker = \d+", f"tasks_per_worker = {tasks_per_worker}", text)
+    for key, value in (("count", frames), ("width", width), ("height", height), ("tasks_per_worker", tasks_per_worker)):
+        if value is not None:  # whole-number lines only: a camera's `height = 1.2` stays
+            text = re.sub(rf"(?m)^{key} = \d+[ \t]*$", f"{key} = {value}", text)
     dst.write_text(text)
     return dst
 
@@ -45,7 +43,8 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 
 def dataset_section(ctx: Context) -> dict:
-    from ..runtime.render.dataset import run_dataset
+    from ..builder.dask_executor import dask_executor
+    from ..runtime.render.dataset import dask_frames, run_dataset
 
     built = ctx.built or ctx.out
     source = ctx.sources / CONFIG
@@ -61,7 +60,8 @@ def dataset_section(ctx: Context) -> dict:
             (out / sub).symlink_to(built / sub)
         config = _config(source, ctx.work / "dataset" / f"{name}.toml", frames, width, height, tasks)
         t0 = time.perf_counter()
-        folder = run_dataset(config, out, executor=executor, workers=workers, sources=ctx.sources)
+        pool = dask_frames(dask_executor) if executor == "dask" else None
+        folder = run_dataset(config, out, pool=pool, executor=executor, workers=workers, sources=ctx.sources)
         wall = time.perf_counter() - t0
         timings = json.loads((folder / "timings.json").read_text())
         files = _files(folder)

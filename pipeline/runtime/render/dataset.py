@@ -25,7 +25,7 @@ import time
 from concurrent.futures import Executor, as_completed
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, ContextManager, Iterator
 
 import numpy as np
 
@@ -38,17 +38,19 @@ from .sensor import PhoneCamera
 from .site import Site, load_site
 
 RENDERER = "blender-cycles-cpu"
+FramePool = Callable[[int, int], ContextManager[Executor]]  # (workers, frames a worker renders before it goes)
 FOLDERS = ("images", "masks", "depth", "records")
 
 
 # --- the run (the calling process) -------------------------------------------------------
 
 
-def run_dataset(config_path, out, *, frames: int | None = None, executor: str = "local",
-                scheduler: str | None = None, workers: int = 1, sources: Path | None = None,
-                progress=None) -> Path:
+def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool | None = None,
+                executor: str = "local", workers: int = 1, sources: Path | None = None, progress=None) -> Path:
     """Render the config's first `frames` frames (all by default) that are not on disk
-    yet, then write frames.jsonl and coco.json. Returns the dataset's folder."""
+    yet, then write frames.jsonl and coco.json. Returns the dataset's folder.
+    `pool`: where frames render (default local_frames, spawned processes here; see
+    dask_frames); `executor`: its name in timings.json."""
     cfg = dataset_config.load(config_path)
     out = Path(out)
     sources = Path(sources) if sources else Path(__file__).resolve().parents[3] / "sources"
@@ -68,8 +70,8 @@ def run_dataset(config_path, out, *, frames: int | None = None, executor: str = 
     t0 = time.perf_counter()
     seconds = []
     if todo:
-        with _executor(executor, workers, scheduler, cfg.sensor.tasks_per_worker) as pool:
-            futures = [pool.submit(render_frame, job, i) for i in todo]
+        with (pool or local_frames)(workers, cfg.sensor.tasks_per_worker) as frame_pool:
+            futures = [frame_pool.submit(render_frame, job, i) for i in todo]
             for f in as_completed(futures):
                 try:
                     result = f.result()
@@ -130,27 +132,83 @@ def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
     atomic_write(folder / "coco.json", json.dumps(coco, sort_keys=True, separators=(",", ":")) + "\n")
 
 
-@contextmanager
-def _executor(kind: str, workers: int, scheduler: str | None, tasks_per_worker: int) -> Iterator[Executor]:
-    if kind == "dask":
-        from ...builder.dask_executor import dask_executor
+def dask_frames(dask_executor, scheduler: str | None = None) -> FramePool:
+    """Frames on dask.distributed through `dask_executor` (the builder's; handed in,
+    since the runtime does not import the builder): a LocalCluster, or the cluster at
+    `scheduler`, whose workers see OUT and the sources at the same paths.
 
-        with dask_executor(workers, scheduler, preload=("bpy",), tasks_per_worker=tasks_per_worker) as pool:
-            yield pool
-        return
-    if kind != "local":
-        raise UserError(None, "--executor", f"{kind!r}: local or dask")
+    A dask worker runs tasks on threads, and Blender renders on its main thread only:
+    each worker keeps one Blender process of its own (a one-process pool, replaced
+    after `tasks_per_worker` frames), which a worker may start only when it is not a
+    daemon (`distributed.worker.daemon: false` for workers started elsewhere)."""
+
+    @contextmanager
+    def pool(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
+        import dask
+
+        with dask.config.set({"distributed.worker.daemon": False}):
+            with dask_executor(workers, scheduler) as executor:
+                yield _InBlenderProcess(executor, tasks_per_worker)
+
+    return pool
+
+
+@contextmanager
+def local_frames(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
+    """Spawned processes (Blender does not survive a fork), each replaced after
+    `tasks_per_worker` frames, so a long run's memory stays that of a fresh one."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    # spawned: Blender does not survive a fork; replaced every tasks_per_worker frames
-    # so a long run's memory stays that of a fresh worker
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               max_tasks_per_child=tasks_per_worker)
+                               max_tasks_per_child=tasks_per_worker, initializer=_exit_with_parent)
     try:
         yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _exit_with_parent() -> None:
+    """A Blender process ends when the process that started it is gone (a dask
+    worker closed by its nanny, a killed `twin dataset`), instead of waiting on a
+    pipe nobody writes to."""
+    import threading
+
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
+
+
+class _InBlenderProcess:
+    """Submits `render_frame` calls to an executor's workers, each of which hands them
+    to its own Blender process."""
+
+    def __init__(self, pool: Executor, tasks_per_worker: int):
+        self.pool, self.tasks_per_worker = pool, tasks_per_worker
+
+    def submit(self, fn, *args):
+        return self.pool.submit(_in_blender_process, fn, args, self.tasks_per_worker)
+
+
+_BLENDER = None  # in a dask worker: its Blender process (a one-process pool), kept between frames
+
+
+def _in_blender_process(fn, args: tuple, tasks_per_worker: int):
+    global _BLENDER
+    if _BLENDER is not None and getattr(_BLENDER, "_broken", False):
+        _BLENDER = None  # its process died (a crash): the next frame starts another
+    if _BLENDER is None:
+        _BLENDER = local_frames(1, tasks_per_worker)
+        import atexit
+
+        atexit.register(_BLENDER.__exit__, None, None, None)
+        _BLENDER = _BLENDER.__enter__()
+    return _BLENDER.submit(fn, *args).result()
 
 
 # --- one frame (a worker) -----------------------------------------------------------------
