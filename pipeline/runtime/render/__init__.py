@@ -13,5 +13,8 @@ pose and oil-column shape weights from the state.
 - cycles:   the Cycles scene (the only module that touches bpy)
 - frames:   rendering a sequence of shots, labels, image and JSON writers
 - scenario: `twin render SCENARIO`
-- study:    `twin render --study`
+- study:    `twin render --study` (its constants in sources/study.toml)
+- dataset_config, dataset_plan, dataset, labels: `twin dataset CONFIG`, frames as
+            independent tasks, instance masks, depth and COCO from Cycles' own passes
+- gauge_reader, baseline: `twin baseline`, the study's gauge reader over a dataset
 """
