@@ -170,6 +170,7 @@ def _png(fig) -> bytes:
 
 
 STYLE = {"relative": ("o", "C0"), "study": ("^", "C1")}
+H_CAP = 3.0  # H above this is drawn on the plot's upper edge
 
 
 def plot(rows: list[dict], key: str, label: str, marks: tuple[float, ...]) -> bytes:
@@ -193,9 +194,16 @@ def plot(rows: list[dict], key: str, label: str, marks: tuple[float, ...]) -> by
     top.set_ylabel("|reading error| (% level)")
     top.legend(loc="center left", fontsize=7)
     with_h = [r for r in scored if r.get("H") is not None]
-    bottom.scatter([r[key] for r in with_h], [r["H"] for r in with_h], s=18, color="C2")
+    inside = [r for r in with_h if r["H"] <= H_CAP]
+    above = [r for r in with_h if r["H"] > H_CAP]
+    bottom.scatter([r[key] for r in inside], [r["H"] for r in inside], s=18, color="C2")
+    if above:  # shadows or a dark face counted as pointer rows: drawn on the cap
+        bottom.scatter([r[key] for r in above], [H_CAP] * len(above), s=24, marker="^", color="C2",
+                       label=f"H > {H_CAP:g}")
+        bottom.legend(loc="upper left", fontsize=7)
+    bottom.set_ylim(-0.05, H_CAP * 1.08)
     bottom.axhline(1.0, color="grey", lw=0.8, ls="--")
-    bottom.set_ylabel("H (extent / true extent)")
+    bottom.set_ylabel("H: dark extent / true extent\n(H true = 1)")
     bottom.set_xlabel(label)
     for ax in (top, bottom):
         for x in marks:
