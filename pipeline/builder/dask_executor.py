@@ -143,8 +143,10 @@ def _worker_plugin_class():
         """What each worker does when it starts (a restarted one too): the local pool's
         set-up (executors.init_worker) when `threads` is given, then `preload`
         imported once. `local`: the workers are this machine's, named 0..n-1 by the
-        LocalCluster, and each keeps to its own CPU on one-core tasks as a local
-        pool's worker does."""
+        LocalCluster: each keeps to its own CPU on one-core tasks as a local pool's
+        worker does, and leaves Ctrl-C to the build, which closes the cluster (the
+        terminal sends it to the whole process group, and a worker would end with
+        a traceback on the user's screen)."""
 
         name = "twin-setup"
 
@@ -159,6 +161,10 @@ def _worker_plugin_class():
             if self.threads is not None:
                 slot = _Slot(worker.name) if self.local and isinstance(worker.name, int) else None
                 init_worker(self.threads, self.cpus if self.local else (), slot, self.address_space)
+            if self.local:
+                import signal
+
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
             for name in self.preload:
                 importlib.import_module(name)
 
@@ -280,7 +286,10 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
         with dask.config.set({**LOCAL_CONFIG, "distributed.nanny.pre-spawn-environ": spawn}):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                    dashboard_address=None, silence_logs=logging.CRITICAL,
-                                   memory_limit=memory or 0, env=env)
+                                   memory_limit=memory or 0, env=env,
+                                   # its health and metrics routes, on any free port of this machine's
+                                   # loopback (8787 by default, which another cluster may hold)
+                                   scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
         client = Client(cluster, set_as_default=False)
     else:
         try:
