@@ -247,6 +247,16 @@ def test_dask_executor_hands_back_a_calls_own_error():
         assert executor.submit(divmod, 7, 2).result(timeout=300) == (3, 1)
 
 
+def test_a_preload_no_worker_can_import_is_a_user_error_and_closes_the_cluster():
+    from pipeline.errors import UserError
+
+    before = children()
+    with pytest.raises(UserError, match="cannot import no_such_module"):
+        with dask_executor(1, preload=("no_such_module",)):
+            pass
+    assert _gone(children() - before)
+
+
 def test_a_worker_is_worn_out_by_its_task_count_or_its_memory():
     assert not worn_out(3, None, None)
     assert worn_out(3, 3, None) and not worn_out(2, 3, None)

@@ -290,20 +290,20 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
                                    # its health and metrics routes, on any free port of this machine's
                                    # loopback (8787 by default, which another cluster may hold)
                                    scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
-        client = Client(cluster, set_as_default=False)
-    else:
+    client = None
+    try:
         try:
-            client = Client(scheduler, set_as_default=False, timeout="20s")
+            client = Client(cluster or scheduler, set_as_default=False, timeout="20s")
         except (OSError, TimeoutError) as e:
             raise UserError("--scheduler", scheduler, f"cannot reach the dask scheduler: {e}") from None
-    try:
         try:
             client.register_plugin(plugin)
         except ImportError as e:
             raise UserError("--executor dask", None, f"a dask worker cannot import {e.name or e}: "
                                                      "install it where the workers run") from None
     except BaseException:
-        client.close()
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
         raise
