@@ -109,23 +109,13 @@ class Facts:
     morphs: dict[str, Morph] = field(default_factory=dict)  # trimesh geometry name -> targets
 
 
-def _hardened_parser():
-    from lxml import etree
-
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, dtd_validation=False,
-                           huge_tree=False, remove_comments=True)
-
-
 def collada_facts(path: Path) -> Facts:
     """<unit meter>, <up_axis>, and the animations and controllers trimesh leaves out."""
-    from lxml import etree
+    from .. import safe_xml  # lxml is loaded by the first COLLADA file
 
-    if re.search(rb"<!DOCTYPE", Path(path).read_bytes()[:65536], re.IGNORECASE):
+    if safe_xml.declares_doctype(path):
         raise UserError(path, None, "COLLADA file declares a DOCTYPE (entities are refused, never resolved)")
-    try:
-        root = etree.parse(str(path), _hardened_parser()).getroot()
-    except etree.XMLSyntaxError as e:
-        raise UserError(path, None, f"not well-formed XML: {e}") from None
+    root = safe_xml.parse(path, remove_comments=True).getroot()
     facts = Facts()
     unit = root.find("{*}asset/{*}unit")
     if unit is not None and unit.get("meter") is not None:

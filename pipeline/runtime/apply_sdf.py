@@ -25,13 +25,10 @@ from lxml import etree
 
 from .. import ir
 from ..export import names, sdf
+from .. import safe_xml
 from ..files import atomic_write
 from ..geometry.transform import matrix_to_xyz_rpy
 from . import nodes, sun as sunmod
-
-
-def _parser() -> etree.XMLParser:
-    return etree.XMLParser(resolve_entities=False, no_network=True, remove_blank_text=True, huge_tree=False)
 
 
 def _f(v: float) -> str:
@@ -72,7 +69,7 @@ def _material(visual_el, record: dict) -> None:
 
 def build_variant(model_sdf: bytes, name: str, states: list[nodes.VisualState], materials: dict) -> bytes:
     """A copy of model.sdf renamed `name`, each state's visual posed and dressed."""
-    root = etree.fromstring(model_sdf, _parser())
+    root = etree.fromstring(model_sdf, safe_xml.parser(remove_blank_text=True))
     model = root.find("model")
     model.set("name", name)
     for vs in states:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
+from .. import safe_xml
 from ..export.names import fmt, lod_model_name
 from ..geometry.transform import matrix_to_xyz_rpy, xyz_rpy_to_matrix
 from .placements import Placed
@@ -103,10 +104,6 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     Path(path).write_bytes(data)
 
 
-def _parser() -> etree.XMLParser:
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, remove_blank_text=True)
-
-
 def _pose_of(el) -> np.ndarray:
     text = el.findtext("pose")
     values = [float(v) for v in text.split()] if text else [0.0] * 6
@@ -121,7 +118,7 @@ def _pose_text(matrix: np.ndarray) -> str:
 def grouped_model(variant: str, model_sdf: Path, members: list[Placed]) -> etree._Element:
     """One static model with one link: per member placement a frame named by its TAG at
     its pose, and the variant's visuals and collisions posed relative to that frame."""
-    source = etree.parse(str(model_sdf), _parser()).getroot().find("model")
+    source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
     source_links = source.findall("link")
     model = etree.Element("model", name=variant)
     _text(model, "static", "true")

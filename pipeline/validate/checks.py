@@ -19,7 +19,7 @@ from pathlib import Path, PurePosixPath
 import numpy as np
 from lxml import etree
 
-from .. import ir
+from .. import ir, safe_xml
 from ..digest import sha256_file
 from ..export import names
 from ..findings import Finding, finding, finite, mesh_findings, sort_findings
@@ -268,29 +268,19 @@ def check_asset(asset: ir.Asset, budget_triangles: int | None = None, memo=None)
 # --- package --------------------------------------------------------------------------
 
 _LOD_VARIANT = re.compile(r"^(?P<base>.+)__lod\d+$")
-_PROLOG_BYTES = 1 << 16
-_DOCTYPE = re.compile(rb"<!DOCTYPE", re.IGNORECASE)
-
-
-def hardened_parser() -> etree.XMLParser:
-    """No entity expansion, no DTD loading, no network: a package is untrusted."""
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                           dtd_validation=False, huge_tree=False)
 
 
 def parse_xml(path: Path, site: str) -> tuple[etree._ElementTree | None, list[Finding]]:
-    """Parse with the hardened parser; any DOCTYPE is refused (COLLADA and SDF need none,
+    """Parse with safe_xml's parser; any DOCTYPE is refused (COLLADA and SDF need none,
     so one can only be there to declare entities)."""
     try:
-        with open(path, "rb") as f:
-            head = f.read(_PROLOG_BYTES)
+        doctype = safe_xml.declares_doctype(path)
     except OSError as e:
         return None, [finding("PKG002", site, f"cannot read: {e.strerror}")]
-    # Refuse before libxml2 sees it: it would still read the entity declarations.
-    if _DOCTYPE.search(head):
+    if doctype:
         return None, [finding("PKG005", site, "declares a DOCTYPE; refused, entities not resolved")]
     try:
-        tree = etree.parse(str(path), hardened_parser())
+        tree = etree.parse(str(path), safe_xml.parser())
     except etree.XMLSyntaxError as e:
         # e.msg, not str(e): the latter names the absolute path, which differs per checkout
         return None, [finding("PKG001", site, f"not well-formed XML: {e.msg} (line {e.lineno})")]

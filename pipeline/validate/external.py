@@ -27,6 +27,8 @@ from typing import Literal
 
 from lxml import etree
 
+from .. import safe_xml
+
 Status = Literal["passed", "failed", "skipped"]
 
 _SDF_HINT = "apt-get install libsdformat12-12 sdformat-sdf ignition-tools (or: bash .ci/install-tools)"
@@ -155,7 +157,7 @@ def ign_sdf_world(path: Path, sdf_path: list[Path], part_includes: int = WORLD_P
     checked at once."""
     path = Path(path)
     try:
-        tree = etree.parse(str(path), _hardened_parser())
+        tree = etree.parse(str(path), safe_xml.parser())
     except (OSError, etree.XMLSyntaxError):
         return ign_sdf(path, sdf_path)  # sdformat gives the file's error as it sees it
     world = tree.getroot().find("world")
@@ -455,7 +457,7 @@ def collada_schema(path: Path) -> ExternalResult:
     except ImportError as e:
         return _skipped(name, path, f"pycollada not importable: {e}", _COLLADA_HINT)
     try:
-        tree = etree.parse(str(path), _hardened_parser())
+        tree = etree.parse(str(path), safe_xml.parser())
     except (OSError, etree.XMLSyntaxError) as e:
         return ExternalResult(name, str(path), "failed", (f"not well-formed XML: {e}",), _COLLADA_HINT)
     if tree.docinfo.internalDTD is not None or tree.docinfo.externalDTD is not None:
@@ -480,11 +482,6 @@ def collada_schema(path: Path) -> ExternalResult:
     log = validator.COLLADA_SCHEMA_1_4_1_INSTANCE.error_log
     messages = tuple(f"line {e.line}: {e.message}" for e in log) or ("schema validation failed",)
     return ExternalResult(name, str(path), "failed", messages, _COLLADA_HINT)
-
-
-def _hardened_parser() -> etree.XMLParser:
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False,
-                           dtd_validation=False, huge_tree=False)
 
 
 def _skipped(validator: str, path: Path, why: str, hint: str) -> ExternalResult:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
+from .. import safe_xml
 from ..findings import Finding, finding
 
 PROBE = Path(__file__).resolve().parents[2] / "tools" / "gzprobe" / "gzprobe"
@@ -104,10 +105,6 @@ def probe_world(world: Path, sdf_path: list[Path], *, jobs: int = 2, meshes: boo
 
 # --- what the file holds --------------------------------------------------------------
 
-def _parser() -> etree.XMLParser:
-    return etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False, huge_tree=True)
-
-
 def _by_id(root) -> dict[str, etree._Element]:
     return {el.get("id"): el for el in root.iter() if el.get("id") is not None}
 
@@ -125,7 +122,7 @@ def written_summary(path: Path) -> MeshSummary:
 
     Honours each input's offset, <vertices> inputs and <unit meter>; node transforms are
     not applied (our meshes are written in their own frame, node matrix identity)."""
-    root = etree.parse(str(path), _parser()).getroot()
+    root = etree.parse(str(path), safe_xml.parser(huge_tree=True)).getroot()
     ids = _by_id(root)
     unit = root.find("{*}asset/{*}unit")
     scale = float(unit.get("meter", "1")) if unit is not None else 1.0
