@@ -26,20 +26,19 @@ RUNS = (("local_1", "local", 1, None), ("local_2", "local", 2, None), ("dask_1",
         ("dask_2", "dask", 2, None), ("per_frame", "local", 1, 1))
 
 
-def _config(source: Path, dst: Path, frames: int, width: int, height: int, tasks_per_worker: int | None) -> Path:
-    """The shipped config with `frames` frames at width x height (and, for the per-frame
-    run, a worker replaced after every frame)."""
+def _config(source: Path, dst: Path, frames: int, width: int, height: int) -> Path:
+    """The shipped config with `frames` frames at width x height."""
     text = source.read_text()
-    for key, value in (("count", frames), ("width", width), ("height", height), ("tasks_per_worker", tasks_per_worker)):
-        if value is not None:  # whole-number lines only: a camera's `height = 1.2` stays
-            text = re.sub(rf"(?m)^{key} = \d+[ \t]*$", f"{key} = {value}", text)
+    for key, value in (("count", frames), ("width", width), ("height", height)):
+        # whole-number lines only: a camera's `height = 1.2` stays
+        text = re.sub(rf"(?m)^{key} = \d+[ \t]*$", f"{key} = {value}", text)
     dst.write_text(text)
     return dst
 
 
 def _files(folder: Path) -> dict[str, bytes]:
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and p.name not in ("timings.json", "dataset.json")}
+            if p.is_file() and p.name != "timings.json"}
 
 
 def dataset_section(ctx: Context) -> dict:
@@ -53,15 +52,16 @@ def dataset_section(ctx: Context) -> dict:
     frames = ctx.pick(2, 8)
     width, height = ctx.pick((160, 120), (640, 480))
     runs, reference = {}, None
+    config = _config(source, ctx.work / "dataset.toml", frames, width, height)
     for name, executor, workers, tasks in RUNS:
         out = ctx.work / "dataset" / name
         out.mkdir(parents=True)
         for sub in ("models", "scene"):
             (out / sub).symlink_to(built / sub)
-        config = _config(source, ctx.work / "dataset" / f"{name}.toml", frames, width, height, tasks)
         t0 = time.perf_counter()
         pool = dask_frames(dask_executor) if executor == "dask" else None
-        folder = run_dataset(config, out, pool=pool, executor=executor, workers=workers, sources=ctx.sources)
+        folder = run_dataset(config, out, pool=pool, executor=executor, workers=workers, tasks_per_worker=tasks,
+                             sources=ctx.sources)
         wall = time.perf_counter() - t0
         timings = json.loads((folder / "timings.json").read_text())
         files = _files(folder)

@@ -46,11 +46,13 @@ FOLDERS = ("images", "masks", "depth", "records")
 
 
 def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool | None = None,
-                executor: str = "local", workers: int = 1, sources: Path | None = None, progress=None) -> Path:
+                executor: str = "local", workers: int = 1, tasks_per_worker: int | None = None,
+                sources: Path | None = None, progress=None) -> Path:
     """Render the config's first `frames` frames (all by default) that are not on disk
     yet, then write frames.jsonl and coco.json. Returns the dataset's folder.
     `pool`: where frames render (default local_frames, spawned processes here; see
-    dask_frames); `executor`: its name in timings.json."""
+    dask_frames); `executor`: its name in timings.json; `tasks_per_worker`: frames a
+    Blender process renders before it is replaced (default: the config's)."""
     cfg = dataset_config.load(config_path)
     out = Path(out)
     sources = Path(sources) if sources else Path(__file__).resolve().parents[3] / "sources"
@@ -70,7 +72,7 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
     t0 = time.perf_counter()
     seconds = []
     if todo:
-        with (pool or local_frames)(workers, cfg.sensor.tasks_per_worker) as frame_pool:
+        with (pool or local_frames)(workers, tasks_per_worker or cfg.sensor.tasks_per_worker) as frame_pool:
             futures = [frame_pool.submit(render_frame, job, i) for i in todo]
             for f in as_completed(futures):
                 try:
@@ -145,6 +147,7 @@ def dask_frames(dask_executor, scheduler: str | None = None) -> FramePool:
     @contextmanager
     def pool(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
         import dask
+        import distributed  # noqa: F401 - its config defaults load before one of them is set
 
         with dask.config.set({"distributed.worker.daemon": False}):
             with dask_executor(workers, scheduler) as executor:
