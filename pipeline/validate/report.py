@@ -25,7 +25,7 @@ from lxml import etree
 
 from ..errors import UserError
 from ..files import atomic_write
-from ..findings import RULES, Finding
+from ..findings import RULES, Finding, finding
 from . import external, gazebo
 from .checks import check_package
 
@@ -57,7 +57,7 @@ def _manifest_findings(manifest: dict) -> list[tuple[str, Finding]]:
             try:
                 out.append((str(stage), Finding.from_dict(d)))
             except (KeyError, TypeError):
-                out.append(("built", Finding("PKG006", "error", manifest.get("asset", "?"),
+                out.append(("built", finding("PKG006", manifest.get("asset", "?"),
                                              f"malformed finding in manifest.json: {d!r}"[:300])))
     return out
 
