@@ -33,6 +33,7 @@ from ...errors import UserError
 from ...files import atomic_path, atomic_write
 from . import dataset_config, labels
 from .dataset_plan import FramePlan, Planner, frame_id, switch_angles
+from .gauge_reader import dial_of
 from .pinhole import intrinsics
 from .sensor import PhoneCamera
 from .site import Site, load_site
@@ -306,12 +307,11 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
     site, shot, fid = ctx["site"], plan.shot, plan.frame_id
     gauges = []
     for p in site.placements:
-        m = site.manifests.get(p["asset"], {})
-        rotate = any(b["effect"] == "rotate" for b in m.get("bindings", []))
-        if not rotate or p["tag"] not in plan.oil_levels:
+        dial = dial_of(site.pose(p), site.manifests.get(p["asset"], {}))
+        if dial is None or p["tag"] not in plan.oil_levels:
             continue
-        seen = labels.gauge_visibility(site.pose(p), shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
-        gauges.append({"tag": p["tag"], "reading": plan.oil_levels[p["tag"]].get("oil_level_tank"),
+        seen = labels.gauge_visibility(dial, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
+        gauges.append({"tag": p["tag"], "reading": plan.oil_levels[p["tag"]].get(dial.binding["variable"]),
                        "unit": "%", **seen})
     kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
     return {

@@ -19,7 +19,7 @@ from ...errors import UserError
 from .. import camera as camera_model
 from .. import sun as sun_model
 from .dataset_config import Camera, DatasetConfig
-from .gauge import dial_world
+from .gauge_reader import dial_of
 from .pinhole import cull, intrinsics, look_at
 from .site import Shot, Site
 
@@ -139,8 +139,9 @@ class Planner:
         centre of its bounding box."""
         p = self.site.placement(tag)
         m = self.site.manifests.get(p["asset"], {})
-        if any(b["effect"] == "rotate" for b in m.get("bindings", [])):
-            return dial_world(self.site.pose(p))[0]
+        dial = dial_of(self.site.pose(p), m)
+        if dial is not None:
+            return dial.centre
         lo, hi = np.array(m["bounds"][0]), np.array(m["bounds"][1])
         return (self.site.pose(p) @ np.r_[(lo + hi) / 2, 1.0])[:3]
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gauge import dial_world
+from .gauge_reader import Dial
 from .pinhole import project
 
 # a dial is visible when the surface at its centre's pixel is its own placement's and
@@ -51,14 +51,14 @@ def annotations(ids: np.ndarray, tag_of: dict[int, str], category_of: dict[str, 
     return out
 
 
-def gauge_visibility(model_pose: np.ndarray, cam_pose: np.ndarray, k: dict, ids: np.ndarray,
-                     depth: np.ndarray, instance: int) -> dict:
-    """Is the dial of the placement at `model_pose` seen in this frame: its centre in
-    the frame, on a pixel of its own instance, at the dial's depth (not hidden behind
-    something of its own, such as the tank seen from behind)."""
-    centre, normal = dial_world(model_pose)
+def gauge_visibility(dial: Dial, cam_pose: np.ndarray, k: dict, ids: np.ndarray, depth: np.ndarray,
+                     instance: int) -> dict:
+    """Is `dial` (its placement's, gauge_reader.dial_of) seen in this frame: its centre
+    in the frame and facing the camera, on a pixel of its own instance, at the dial's
+    depth (not hidden behind something of its own, such as the tank seen from behind)."""
+    centre = dial.centre
     u, v = project(centre[None, :], cam_pose, k)[0]
-    facing = float(normal @ (cam_pose[:3, 3] - centre)) > 0.0
+    facing = float(dial.axis @ (cam_pose[:3, 3] - centre)) > 0.0
     record = {"centre_px": None if np.isnan(u) else [float(u), float(v)], "visible": False}
     if np.isnan(u) or not (0 <= u < k["width"] and 0 <= v < k["height"]):
         return record
