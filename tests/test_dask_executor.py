@@ -129,15 +129,6 @@ def test_a_scheduler_address_is_only_for_dask(tmp_path):
 # --- the scheduler on dask, with the toy graph ----------------------------------------
 
 
-@pytest.fixture
-def src(tmp_path):
-    d = tmp_path / "src"
-    d.mkdir()
-    (d / "a.txt").write_text("alpha")
-    (d / "b.txt").write_text("beta")
-    return d
-
-
 def test_a_task_whose_worker_dies_fails_alone_and_the_cluster_goes(src, tmp_path):
     """A worker killed under its task fails that task alone, as a local worker's death
     does (one task per worker process: the death is its own); the build goes on and
