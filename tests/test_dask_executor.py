@@ -238,6 +238,21 @@ def test_dask_executor_hands_back_a_calls_own_error():
         assert executor.submit(divmod, 7, 2).result(timeout=300) == (3, 1)
 
 
+def _die_once(marker: str) -> int:
+    """Kills its worker the first time (as a nanny ends one past its memory), then
+    returns its pid."""
+    if not os.path.exists(marker):
+        Path(marker).write_text("died")
+        os.kill(os.getpid(), signal.SIGKILL)
+    return os.getpid()
+
+
+def test_a_call_whose_worker_died_runs_once_more_on_a_fresh_one(tmp_path):
+    with dask_executor(1) as executor:
+        assert executor.submit(_die_once, str(tmp_path / "died")).result(timeout=300) > 0
+    assert (tmp_path / "died").is_file()
+
+
 def test_a_preload_no_worker_can_import_is_a_user_error_and_closes_the_cluster():
     from pipeline.errors import UserError
 

@@ -16,8 +16,10 @@ no later task frees: Blender's and the allocators' caches, fragmented heaps). Th
 worker stops taking tasks before its last one returns, so no task is cut short by a
 recycle; one queued on it goes to another worker. Beyond that the nanny terminates a
 worker whose memory passes dask's `terminate` threshold mid-task, and dask reruns a
-task whose worker died on another one up to `allowed-failures` times (none on a
-LocalCluster: with one task per process, a death is the task's own).
+task whose worker died on another one up to `allowed-failures` times: on a
+LocalCluster once for any calls (a worker's memory may be what earlier calls left),
+never for the build's tasks (one task per process: a death is the task's own, and
+the local pool fails it too).
 
 dask is imported when an executor starts, never at import time of the pipeline.
 """
@@ -58,7 +60,6 @@ LOCAL_CONFIG = {
     "distributed.worker.memory.spill": False,
     "distributed.worker.memory.pause": False,
     "distributed.worker.profile.enabled": False,
-    "distributed.scheduler.allowed-failures": 0,
 }
 
 
@@ -260,12 +261,13 @@ def _set(result: Future, value=None, exception: BaseException | None = None) -> 
 def start(workers: int, scheduler: str | None = None, *, threads: int | None = None, cpus: tuple[int, ...] = (),
           address_space: int | None = None, preload: tuple[str, ...] = (), memory: int | None = None,
           tasks_per_worker: int | None = None, lost: Callable[[Exception], object] | None = None,
-          executor_class: type[DaskExecutor] = DaskExecutor) -> DaskExecutor:
+          retries: int = 1, executor_class: type[DaskExecutor] = DaskExecutor) -> DaskExecutor:
     """A DaskExecutor on a new LocalCluster of `workers` processes (no `scheduler`) or
     on the cluster at `scheduler`. `threads`: each worker's native thread pools and
     fork_join.beside share (executors.init_worker, with `cpus` and `address_space`);
     `memory`: bytes a worker may hold (the nanny's limit on a LocalCluster, and the
-    recycling rule everywhere)."""
+    recycling rule everywhere); `retries`: workers a LocalCluster lets a call's death
+    cost after the first before it fails with KilledWorker."""
     try:
         import dask
         from distributed import Client, LocalCluster
@@ -283,7 +285,8 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
         # the nanny sets its pre-spawn variables in this process too; "random" is
         # Python's own default, where dask would fix the seed of later subprocesses
         spawn = {"PYTHONHASHSEED": os.environ.get("PYTHONHASHSEED", "random")}
-        with dask.config.set({**LOCAL_CONFIG, "distributed.nanny.pre-spawn-environ": spawn}):
+        with dask.config.set({**LOCAL_CONFIG, "distributed.nanny.pre-spawn-environ": spawn,
+                              "distributed.scheduler.allowed-failures": retries}):
             cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1",
                                    dashboard_address=None, silence_logs=logging.CRITICAL,
                                    memory_limit=memory or 0, env=env,
@@ -364,4 +367,4 @@ def dask_pool(workers: Workers, scheduler: str | None = None, tasks_per_worker: 
     the sources at the same paths as this process."""
     return start(workers.count, scheduler, threads=workers.threads, cpus=workers.cpus,
                  address_space=workers.memory, memory=workers.memory, tasks_per_worker=tasks_per_worker,
-                 lost=worker_died, executor_class=BuildExecutor)
+                 lost=worker_died, retries=0, executor_class=BuildExecutor)
