@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from .digest import sha256_json
-from .errors import UserError
+from .errors import UserError, read_input
 
 SCHEMA_DIR = Path(__file__).resolve().parent.parent / "schemas"
 
@@ -35,12 +35,7 @@ def schema(name: str) -> dict:
 
 def read_toml(path: Path) -> dict:
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise UserError(path, None, "file not found") from None
-    except OSError as e:
-        raise UserError(path, None, f"cannot read: {e.strerror}") from None
+    raw = read_input(path)
     try:
         return tomllib.loads(raw.decode("utf-8"))
     except UnicodeDecodeError:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import ir
-from ..errors import UserError
+from ..errors import UserError, read_input
 
 # $INSUNITS code -> (unit name, metres per drawing unit), exact by the units'
 # definitions: ezdxf.units rounds inches and feet to ten digits and has no factor for
@@ -148,12 +148,7 @@ def require_placements_and_platforms(fp: ir.FloorPlan) -> None:
 def _open(path: Path):
     import ezdxf
 
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise UserError(path, None, "file not found") from None
-    except OSError as e:
-        raise UserError(path, None, f"cannot read: {e.strerror}") from None
+    raw = read_input(path)
     # ezdxf tolerates a file cut off after the last complete section; a cut-off floor
     # plan could lose placements, so demand the final EOF marker (ASCII DXF).
     if not raw.startswith(b"AutoCAD Binary DXF") and raw.rstrip().rsplit(None, 1)[-1:] != [b"EOF"]:
