@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...files import atomic_write
 from .cycles import CyclesScene
 from .gauge import POINTER, gauge_box, pointer_angle
 from .pinhole import cull, intrinsics
@@ -66,14 +67,12 @@ def write_png(path: Path, rgb: np.ndarray) -> str:
     if not ok:
         raise RuntimeError(f"could not encode {path}")
     data = buf.tobytes()
-    path.write_bytes(data)
+    atomic_write(path, data)
     return _sha(data)
 
 
 def write_json(path: Path, data) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, sort_keys=True, indent=1, allow_nan=False) + "\n")
-    tmp.replace(path)
+    atomic_write(path, json.dumps(data, sort_keys=True, indent=1, allow_nan=False) + "\n")
 
 
 
