@@ -9,8 +9,9 @@ from pathlib import Path
 from .. import config
 from .layout import ir_path, source_path
 
-# what build_geometry imports (mostly inside functions), and jsonschema for asset.toml's
-# check: an idle worker imports them ahead
+# What build_geometry imports (most of it inside functions) and jsonschema for
+# asset.toml's check: a worker idle while the task waits imports them ahead, so the
+# task does not wait for its imports.
 WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
         "pipeline.findings", "pipeline.fork_join", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
 

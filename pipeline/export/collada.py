@@ -46,8 +46,8 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     A visual writes as many LODs as it has (names.mesh_file(link, visual, k) for
     k < len(visual.lods)); readers fall back to its coarsest one, as Visual.lod does.
     Returns the package-relative paths written, sorted. A level that repeats a finer
-    one's mesh (a part kept at a coarser level, a frozen visual: 789 of the sample's
-    1964 visual LOD files) gets the finer level's bytes, not a second formatting.
+    one's mesh (a part kept at a coarser level, a frozen visual: a large share of a
+    site's LOD files) gets the finer level's bytes, not a second formatting.
     `memo` (builder.memo.FileMemo, under the package code's version): documents an
     earlier build wrote, by what they hold; an edit that leaves a mesh as it was
     links its document instead of formatting it again.

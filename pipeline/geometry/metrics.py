@@ -169,9 +169,9 @@ class SurfaceDistance:
         `exact_above` and at the maximum; elsewhere it is the exact distance to a
         face at most a few millimetres farther than the nearest (never less than the
         true distance). fcpw finds the faces, in float32: on a sliver (a face metres
-        long and millimetres wide) its arithmetic can pick a face up to 3 mm farther
-        than the nearest (measured on the sample's busbars); libigl measures again,
-        in float64, every distance that decides something."""
+        long and millimetres wide, as a busbar's) its arithmetic can pick a face
+        millimetres farther than the nearest; libigl measures again, in float64,
+        every distance that decides something."""
         import fcpw
 
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)

@@ -51,17 +51,16 @@ class CyclesScene:
             s.cycles.denoising_prefilter = "FAST"  # guides from the first hit: clean enough here
             s.cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
             s.cycles.denoising_use_gpu = False  # same pixels on every machine
-        # Blender's factory light paths (12 bounces, caustics, light tree): cutting them to
-        # 2-4 bounces without caustics left the noon close-up 9 % darker than a converged
-        # render (8-bit RMS error 10.8 against 3.5 at 4 samples + OIDN) and saved only a
-        # tenth of the time. The floodlights are off while the sun is up (set_shot).
+        # Blender's factory light paths (12 bounces, caustics, light tree) stay: fewer
+        # bounces without caustics render a close-up darker than a converged render and
+        # save little time. The floodlights are off while the sun is up (set_shot).
         s.render.threads_mode = "FIXED"
         s.render.threads = self.THREADS
         s.render.resolution_x, s.render.resolution_y = cam.width, cam.height
         s.render.resolution_percentage = 100
-        # Cycles' persistent data would keep the BVH between frames (0.1-0.3 s a frame here),
-        # but a night frame (lamps on, sun off) rendered after a day frame came out with other
-        # pixels than the same frame rendered first: a frame must not depend on its history.
+        # Cycles' persistent data would keep the BVH between frames, but with it a night
+        # frame (lamps on, sun off) rendered after a day frame has other pixels than the
+        # same frame rendered first: a frame must not depend on its history.
         s.render.use_persistent_data = False
         s.view_settings.view_transform = "Standard"
         s.render.image_settings.file_format = "OPEN_EXR"
@@ -82,7 +81,7 @@ class CyclesScene:
         w = bpy.data.worlds.new("sky")
         self.scene.world = w
         w.use_nodes = True
-        w.cycles.sampling_method = "MANUAL"  # the automatic 1024 map costs seconds per sky
+        w.cycles.sampling_method = "MANUAL"  # the automatic map (1024) is slow to build for each sky
         w.cycles.sample_map_resolution = 64
         nt = w.node_tree
         self.sky = nt.nodes.new("ShaderNodeTexSky")
@@ -144,7 +143,7 @@ class CyclesScene:
         bpy.ops.import_scene.gltf(filepath=str(glb))
         new = [o for o in bpy.data.objects if o not in before]
         # Blender imports MSFT_lod's out-of-scene nodes as extra roots at the origin:
-        # close-ups draw LOD 0, so the lower levels go
+        # close-ups draw LOD 0, so the lower levels go.
         lower = [o for o in new if LOD_NODE.search(_base_name(o.name))]
         new = [o for o in new if o not in lower]
         for o in lower:
@@ -154,7 +153,7 @@ class CyclesScene:
         for o in new:
             # A thin pane passes ~92 % of the light: shadow rays ignore it, so the dial
             # behind gets direct light (through a transparent shader they would be
-            # sampled less well: twice the noise, half the light, measured at 16 samples).
+            # sampled less well: noisier and darker).
             if any(sl.material is not None and sl.material.name in glass for sl in o.material_slots):
                 o.visible_shadow = False
         root = next(o for o in new if o.parent is None)
@@ -371,8 +370,8 @@ GLASS_ALPHA_MAX = 0.5  # glTF alpha at or below which a material is a window, no
 
 def _tune_material(mat) -> bool:
     """Imported glTF materials for Cycles: window glass as clear glass (below); every
-    Principled BSDF with single-scatter GGX (multiscatter cost a third of a 16-sample
-    frame; bench_render's reference makes the same choice, so its error leaves this out)."""
+    Principled BSDF with single-scatter GGX (multiscatter is much slower to render;
+    bench_render's reference makes the same choice, so its error leaves this out)."""
     if not mat.node_tree:
         return False
     for n in mat.node_tree.nodes:
