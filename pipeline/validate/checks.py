@@ -37,19 +37,24 @@ LOD_ERROR_SLACK = 1e-9        # float noise in the measured error
 # --- geometry -------------------------------------------------------------------------
 
 
-def _asset_bounds(asset: ir.Asset) -> np.ndarray | None:
-    """(2, 3) model-frame bounds of the LOD0 visuals, or None without finite geometry."""
+def _placed_bounds(parts) -> np.ndarray | None:
+    """(2, 3) bounds of meshes placed by two poses: `parts` yields (vertices (n, 3),
+    outer (4, 4), inner (4, 4)), each placed by outer @ inner; an empty or non-finite
+    part is left out, and None is returned when none is left."""
     pts = []
-    for link, visual in asset.visuals():
-        v = visual.mesh.vertices
-        if len(v) == 0 or not finite(v, link.pose, visual.pose):
-            continue
-        m = link.pose @ visual.pose
-        pts.append(v @ m[:3, :3].T + m[:3, 3])
+    for v, outer, inner in parts:
+        if len(v) and finite(v, outer, inner):
+            m = outer @ inner
+            pts.append(v @ m[:3, :3].T + m[:3, 3])
     if not pts:
         return None
     allp = np.concatenate(pts)
     return np.stack([allp.min(axis=0), allp.max(axis=0)])
+
+
+def _asset_bounds(asset: ir.Asset) -> np.ndarray | None:
+    """(2, 3) model-frame bounds of the LOD0 visuals, or None without finite geometry."""
+    return _placed_bounds((visual.mesh.vertices, link.pose, visual.pose) for link, visual in asset.visuals())
 
 
 def budget_findings(asset_id: str, triangles: int, budget_triangles: int | None) -> list[Finding]:
@@ -172,15 +177,8 @@ def _joint_graph(asset: ir.Asset) -> list[Finding]:
 
 
 def _child_bounds(link: ir.Link) -> np.ndarray | None:
-    pts = []
-    for pose, mesh in [(v.pose, v.mesh) for v in link.visuals] + [(c.pose, c.mesh) for c in link.collisions]:
-        if len(mesh.vertices) and finite(mesh.vertices, pose, link.pose):
-            m = link.pose @ pose
-            pts.append(mesh.vertices @ m[:3, :3].T + m[:3, 3])
-    if not pts:
-        return None
-    allp = np.concatenate(pts)
-    return np.stack([allp.min(axis=0), allp.max(axis=0)])
+    """(2, 3) model-frame bounds of a link's visuals and collisions, or None."""
+    return _placed_bounds((part.mesh.vertices, link.pose, part.pose) for part in (*link.visuals, *link.collisions))
 
 
 def _joint_findings(asset: ir.Asset) -> list[Finding]:
