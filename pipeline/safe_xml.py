@@ -37,6 +37,13 @@ def declares_doctype(path: str | Path) -> bool:
         return _DOCTYPE.search(f.read(PROLOG_BYTES)) is not None
 
 
+def has_doctype(tree: etree._ElementTree) -> bool:
+    """Whether a parsed document declares a DOCTYPE: the check after the parse, for one
+    that comes after more than the prolog's first 64 KiB."""
+    info = tree.docinfo
+    return bool(info.doctype) or info.internalDTD is not None or info.externalDTD is not None
+
+
 def parse(path: str | Path, **options: bool) -> etree._ElementTree:
     """`path` parsed by parser(**options); an unreadable or ill-formed file is a
     UserError naming it."""

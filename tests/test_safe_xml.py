@@ -122,3 +122,31 @@ def test_the_options_that_differ_between_readers(tmp_path):
     with pytest.raises(UserError, match="not well-formed XML"):
         safe_xml.parse(big)
     assert len(safe_xml.parse(big, huge_tree=True).getroot().findtext("float_array")) == 12_000_000
+
+
+def test_a_doctype_past_the_prolog_check_is_seen_after_the_parse(tmp_path):
+    late = tmp_path / "late.dae"
+    late.write_text('<?xml version="1.0"?>\n<!--' + "x" * safe_xml.PROLOG_BYTES + '-->\n'
+                    '<!DOCTYPE COLLADA [<!ENTITY up "Y_UP">]>\n<COLLADA><asset><up_axis>&up;</up_axis></asset></COLLADA>')
+    assert not safe_xml.declares_doctype(late)
+    assert safe_xml.has_doctype(safe_xml.parse(late))
+    bare = tmp_path / "bare.sdf"
+    bare.write_text("<!DOCTYPE sdf>\n<sdf/>")
+    assert safe_xml.has_doctype(safe_xml.parse(bare))
+    plain = tmp_path / "plain.sdf"
+    plain.write_text("<sdf/>")
+    assert not safe_xml.has_doctype(safe_xml.parse(plain))
+
+
+def test_collada_facts_refuse_a_late_doctype(tmp_path):
+    """pycollada, which trimesh reads COLLADA with, expands entities: a DOCTYPE the
+    prolog check misses is refused after the safe parse."""
+    from pipeline.ingest.mesh import collada_facts
+
+    late = tmp_path / "late.dae"
+    late.write_text('<?xml version="1.0"?>\n<!--' + "x" * safe_xml.PROLOG_BYTES + '-->\n'
+                    '<!DOCTYPE COLLADA [<!ENTITY up "Y_UP">]>\n'
+                    '<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">'
+                    "<asset><up_axis>&up;</up_axis></asset></COLLADA>")
+    with pytest.raises(UserError, match=r"late\.dae: COLLADA file declares a DOCTYPE"):
+        collada_facts(late)

@@ -113,9 +113,11 @@ def collada_facts(path: Path) -> Facts:
     """<unit meter>, <up_axis>, and the animations and controllers trimesh leaves out."""
     from .. import safe_xml  # lxml is loaded by the first COLLADA file
 
-    if safe_xml.declares_doctype(path):
+    # Refused before the parse and, for a DOCTYPE past the first 64 KiB, after it:
+    # trimesh's COLLADA reader (pycollada) would expand its entities.
+    if safe_xml.declares_doctype(path) or safe_xml.has_doctype(tree := safe_xml.parse(path, remove_comments=True)):
         raise UserError(path, None, "COLLADA file declares a DOCTYPE (entities are refused, never resolved)")
-    root = safe_xml.parse(path, remove_comments=True).getroot()
+    root = tree.getroot()
     facts = Facts()
     unit = root.find("{*}asset/{*}unit")
     if unit is not None and unit.get("meter") is not None:

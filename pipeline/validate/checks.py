@@ -284,9 +284,8 @@ def parse_xml(path: Path, site: str) -> tuple[etree._ElementTree | None, list[Fi
         return None, [finding("PKG001", site, f"not well-formed XML: {e.msg} (line {e.lineno})")]
     except OSError as e:
         return None, [finding("PKG002", site, f"cannot read: {e.strerror}")]
-    info = tree.docinfo
-    if info.doctype or info.internalDTD is not None or info.externalDTD is not None:
-        return None, [finding("PKG005", site, f"declares DOCTYPE {info.doctype!r}; refused, entities not resolved")]
+    if safe_xml.has_doctype(tree):
+        return None, [finding("PKG005", site, f"declares DOCTYPE {tree.docinfo.doctype!r}; refused, entities not resolved")]
     return tree, []
 
 

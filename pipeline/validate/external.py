@@ -460,7 +460,7 @@ def collada_schema(path: Path) -> ExternalResult:
         tree = etree.parse(str(path), safe_xml.parser())
     except (OSError, etree.XMLSyntaxError) as e:
         return ExternalResult(name, str(path), "failed", (f"not well-formed XML: {e}",), _COLLADA_HINT)
-    if tree.docinfo.internalDTD is not None or tree.docinfo.externalDTD is not None:
+    if safe_xml.has_doctype(tree):
         # COLLADA needs no DTD; one here can only declare entities (XXE, billion laughs).
         return ExternalResult(name, str(path), "failed",
                               ("document declares a DOCTYPE; entities are not resolved",), _COLLADA_HINT)
