@@ -60,9 +60,7 @@ def _size(path: Path) -> int:
 
 
 def blender_section(ctx: Context) -> dict:
-    built = ctx.built
-    if built is None:
-        raise RuntimeError("no built sample (the build section failed)")
+    built = ctx.sample_build()
     work = ctx.work / "blender"
     repeats = 1  # a whole-scene export is minutes in Blender
     a = run_script("assemble", str(built), str(work), str(repeats), timeout=ctx.pick(300.0, 600.0))
@@ -101,9 +99,7 @@ def blender_section(ctx: Context) -> dict:
 
 def reexport_section(ctx: Context, asset: str | None = None) -> dict:
     """The study's per-step Blender re-export of one model (the reactor when present)."""
-    built = ctx.built
-    if built is None:
-        raise RuntimeError("no built sample (the build section failed)")
+    built = ctx.sample_build()
     if asset is None:
         models = sorted(p.name for p in (built / "models").iterdir() if (p / f"{p.name}.glb").exists())
         asset = "shunt_reactor" if "shunt_reactor" in models else models[0]

@@ -23,3 +23,10 @@ class Context:
     def built(self) -> Path | None:
         """A complete build of the sample (from the build section), or None."""
         return self.shared.get("built")
+
+    def sample_build(self) -> Path:
+        """The build section's sample build, for a section that needs it: RuntimeError
+        when there is none."""
+        if self.built is None:
+            raise RuntimeError("no built sample (the build section failed)")
+        return self.built

@@ -72,9 +72,7 @@ def _placement_costs(ctx: Context, models: Path, record: dict) -> list[dict]:
 def gazebo_section(ctx: Context) -> dict:
     from ..validate import gazebo
 
-    built = ctx.built
-    if built is None:
-        raise RuntimeError("no built sample (the build section failed)")
+    built = ctx.sample_build()
     models = built / "models"
     world = next((built / "scene").glob("*.sdf"))
     record = json.loads((built / "scene" / "placements.json").read_text())

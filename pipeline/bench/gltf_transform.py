@@ -111,9 +111,7 @@ def scene_ops(ctx: Context, inputs: dict[str, Path], work: Path) -> list[dict]:
 
 
 def gltf_transform_section(ctx: Context) -> dict:
-    built = ctx.built
-    if built is None:
-        raise RuntimeError("no built sample (the build section failed)")
+    built = ctx.sample_build()
     work = ctx.work / "gltf_transform"
     work.mkdir(parents=True, exist_ok=True)
     out: dict = {"version": version()}

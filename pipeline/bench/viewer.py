@@ -87,9 +87,7 @@ def _writers(ctx: Context, built: Path) -> dict:
 def viewer_section(ctx: Context) -> dict:
     from ..viewer import check
 
-    built = ctx.built
-    if built is None:
-        raise RuntimeError("no built sample (the build section failed)")
+    built = ctx.sample_build()
     out = {"sizes": sizes(built), "writers": _writers(ctx, built)}
     lacking = check.missing()
     if lacking:
