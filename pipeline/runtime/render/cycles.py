@@ -115,7 +115,24 @@ class CyclesScene:
         self.scene.camera = self.camera
 
     # -- content
-    def load(self, tag: str) -> None:
+    def load_many(self, tags) -> None:
+        """`load` each tag, the view layer updated once at the end: an update costs time
+        in proportion to the scene, so one per placement grows with the square of a
+        site's size. The first placement of each asset comes first: the glTF importer
+        updates the view layer at each of its steps, cheap while the scene is small."""
+        tags = list(tags)
+        assets = {self.site.placement(t)["asset"] for t in self.roots}
+        first = []
+        for tag in tags:
+            asset = self.site.placement(tag)["asset"]
+            if asset not in assets:
+                assets.add(asset)
+                first.append(tag)
+        for tag in first + [t for t in tags if t not in set(first)]:
+            self.load(tag, update=False)
+        self.bpy.context.view_layer.update()
+
+    def load(self, tag: str, update: bool = True) -> None:
         """Import a placement's built package (glTF) and put it at its ENU pose."""
         if tag in self.roots:
             return
@@ -129,7 +146,8 @@ class CyclesScene:
         root.matrix_world = _matrix(self.bpy, self.site.pose(p))
         # Children's world matrices are stale until the view layer updates; setting one
         # before that would be relative to the parent's old pose.
-        self.bpy.context.view_layer.update()
+        if update:
+            self.bpy.context.view_layer.update()
         self.roots[tag], self.objects[tag] = root, objs
 
     def load_terrain(self) -> None:
@@ -314,7 +332,7 @@ class CyclesScene:
         self.sky.aerosol_density = float(aerosol)
 
     def render_labels(self) -> tuple[np.ndarray, np.ndarray]:
-        """(instance ids uint16, planar depth float32 in metres, inf where nothing) of
+        """(instance ids uint16, planar depth float32 in metres, inf where no surface) of
         the current frame, from Cycles itself: every surface replaced by an emission of
         (object index, view Z depth), one sample through each pixel's centre, so the
         ids are whole numbers and never blend across an edge."""
@@ -331,7 +349,7 @@ class CyclesScene:
              layer.material_override) = saved
         ids = np.rint(px[..., 0]).astype(np.uint16)
         depth = px[..., 1].astype(np.float32)
-        depth[ids == 0] = np.inf
+        depth[depth <= 0.0] = np.inf  # the background emits nothing; every surface lies beyond the near plane
         return ids, depth
 
     def _label_material(self):

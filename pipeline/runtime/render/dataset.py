@@ -249,8 +249,7 @@ def _context(job: dict) -> dict:
     cam = PhoneCamera(width=cfg.sensor.width, height=cfg.sensor.height, samples=cfg.sensor.samples,
                       render_denoise=cfg.sensor.render_denoise)
     scene = CyclesScene(site, cam, cfg.seed)
-    for tag in job["union"]:
-        scene.load(tag)
+    scene.load_many(job["union"])
     scene.load_terrain()
     poles = [t for t in job["union"] if site.placement(t)["asset"] == "lighting_pole"]
     scene.add_lamps(poles)
