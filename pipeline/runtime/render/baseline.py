@@ -57,13 +57,14 @@ def local_hours(iso: str) -> float:
     return t.hour + t.minute / 60.0 + t.second / 3600.0
 
 
-def score_dataset(folder: Path, site) -> list[dict]:
-    """One row per gauge a frame labels visible, in frame then tag order."""
+def score_dataset(folder: Path, site, frames: list[dict]) -> list[dict]:
+    """One row per gauge a frame (a frames.jsonl record) labels visible, in frame then
+    tag order."""
     import cv2
 
     dials: dict[str, Dial | None] = {}
     rows = []
-    for f in read_frames(folder):
+    for f in frames:
         seen = [g for g in f["gauges"] if g.get("visible")]
         if not seen:
             continue
@@ -94,16 +95,15 @@ def run_baseline(folder, out=None, *, sources: Path | None = None) -> Path:
     from .site import load_site
 
     folder = Path(folder).resolve()
-    if not (folder / "frames.jsonl").is_file():
-        raise UserError(folder, None, "not a dataset folder (no frames.jsonl): give OUT/datasets/<name>/")
+    frames = read_frames(folder)
     build = folder.parents[1] if len(folder.parents) > 1 else folder
     if not (build / "scene" / "placements.json").is_file():
         raise UserError(folder, None, "a dataset folder lies in a build: OUT/datasets/<name>/ beside OUT/scene/")
     site = load_site(build, sources)
-    rows = score_dataset(folder, site)
+    rows = score_dataset(folder, site, frames)
     name = json.loads((folder / "dataset.json").read_text())["dataset"] if (folder / "dataset.json").is_file() \
         else folder.name
-    return write_report(Path(out) if out else build, name, folder, rows)
+    return write_report(Path(out) if out else build, name, folder, rows, frames=len(frames))
 
 
 # --- the bins ------------------------------------------------------------------------------------
@@ -216,14 +216,14 @@ def plot(rows: list[dict], key: str, label: str, marks: tuple[float, ...]) -> by
 # --- the report ---------------------------------------------------------------------------------------
 
 
-def write_report(out: Path, name: str, folder: Path, rows: list[dict]) -> Path:
+def write_report(out: Path, name: str, folder: Path, rows: list[dict], *, frames: int | None = None) -> Path:
     reports = out / "reports"
     reports.mkdir(parents=True, exist_ok=True)
     plots = {"sun": f"baseline_{name}_sun.png", "time": f"baseline_{name}_time.png"}
     atomic_write(reports / plots["sun"], plot(rows, "sun_elevation_deg", "sun elevation (deg)",
                                               tuple(top for _, top in BINS[:-1])))
     atomic_write(reports / plots["time"], plot(rows, "local_hours", "local time (h)", ()))
-    report = {"dataset": name, "min_dial_px": MIN_DIAL_PX, "bins": bins_table(rows), "gauges": rows,
+    report = {"dataset": name, "frames": frames, "min_dial_px": MIN_DIAL_PX, "bins": bins_table(rows), "gauges": rows,
               "plots": plots, "frames_with_gauges": len({r["frame_id"] for r in rows}),
               "examples": write_examples(rows, folder, reports, f"baseline_{name}")}
     atomic_write(reports / f"baseline_{name}.json", json.dumps(report, sort_keys=True, indent=1, allow_nan=False) + "\n")
@@ -320,6 +320,8 @@ def _html(report: dict, images: Path) -> str:
         "<style>body{font-family:sans-serif;max-width:1200px}td,th{padding:3px 7px;border-bottom:1px solid #ccc;"
         "font-size:90%}.gallery{display:flex;flex-wrap:wrap;gap:10px}figure{margin:0;font-size:80%}</style></head><body>"
         f"<h1>Gauge-reading baseline on dataset {e(report['dataset'])}</h1>"
+        f"<p>{'' if report['frames'] is None else str(report['frames']) + ' frames, '}"
+        f"{report['frames_with_gauges']} showing a dial labelled visible, {len(report['gauges'])} dial views.</p>"
         "<p>What the dataset is for: every frame carries the true level of every dial it shows, so a gauge "
         "reader can be scored against the conditions it was taken in. The baseline reads a dial the study's "
         "way: on the dial's projected box (the ROI) it takes the dark pixels of the dial face, finds the ray "
