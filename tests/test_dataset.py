@@ -112,6 +112,13 @@ def test_the_cli_reports_a_bad_config_without_a_traceback(tmp_path):
     assert str(path) in proc.stderr and "dataset.count" in proc.stderr and "Traceback" not in proc.stderr
 
 
+def test_frames_beyond_the_configs_count_are_refused(tmp_path):
+    path = _config(tmp_path)
+    proc = _twin("dataset", path, "--out", tmp_path / "build", "--frames", "5")
+    assert proc.returncode != 0 and "--frames" in proc.stderr and "count, 4" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
 # --- the plan and the frames (the sample scene) --------------------------------------------------
 
 
@@ -247,3 +254,19 @@ def test_a_folder_made_by_another_config_is_refused(tiny_run, sample_build, tmp_
     proc = _twin("dataset", other, "--out", out, "--frames", "1")
     assert proc.returncode != 0 and "another version of the config" in proc.stderr
     assert _files(out / "datasets" / "tiny") == _files(reference)
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_frames_render_when_the_calling_process_imported_bpy(sample_build, tmp_path):
+    """A spawned Blender process inherits its parent's sys.path, which after `import bpy`
+    holds Blender's scripts/modules and its pure-Python `bpy` package (pytest imports bpy
+    in-process for the .blend tests before it gets here)."""
+    script = ("import sys; from pathlib import Path; import bpy; "
+              "from pipeline.runtime.render.dataset import run_dataset; "
+              "print(run_dataset(sys.argv[1], Path(sys.argv[2]), frames=1, sources=Path(sys.argv[3])))")
+    out = _scene_copy(sample_build, tmp_path / "b")
+    proc = subprocess.run([sys.executable, "-c", script, str(_config(tmp_path)), str(out), str(ROOT / "sources")],
+                          capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert (out / "datasets" / "tiny" / "records" / "000000.json").is_file()

@@ -55,12 +55,13 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
     dask_frames); `executor`: its name in timings.json; `tasks_per_worker`: frames a
     Blender process renders before it is replaced (default: the config's)."""
     cfg = dataset_config.load(config_path)
+    n = cfg.count if frames is None else frames
+    if not 1 <= n <= cfg.count:
+        # a worker's scene holds what the config's `count` frames see, no more
+        raise UserError(cfg.path, "--frames", f"{n}: from 1 to the config's count, {cfg.count}")
     out = Path(out)
     sources = Path(sources) if sources else Path(__file__).resolve().parents[3] / "sources"
     site = load_site(out, sources)
-    n = cfg.count if frames is None else frames
-    if n < 1:
-        raise UserError(cfg.path, "--frames", "at least one frame")
     folder = out / "datasets" / cfg.name
     _claim(folder, cfg)
     planner = Planner(cfg, site, sources)
@@ -165,11 +166,21 @@ def local_frames(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
     from concurrent.futures import ProcessPoolExecutor
 
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               max_tasks_per_child=tasks_per_worker, initializer=_exit_with_parent)
+                               max_tasks_per_child=tasks_per_worker, initializer=_init_blender_process)
     try:
         yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _init_blender_process() -> None:
+    """A spawned child starts with its parent's sys.path: when the parent imported bpy,
+    that holds Blender's scripts/modules, whose pure-Python `bpy` package would shadow
+    the real one (No module named '_bpy'). Those entries go; importing bpy adds them back."""
+    import sys
+
+    sys.path[:] = [p for p in sys.path if f"{os.sep}bpy{os.sep}" not in p]
+    _exit_with_parent()
 
 
 def _exit_with_parent() -> None:

@@ -124,6 +124,14 @@ def populate(bl: CyclesScene, site: Site, shots: list[Shot]) -> None:
     bl.add_lamps(sorted(poles))
 
 
+def shot_key(shot: Shot) -> str:
+    """What a frame shows, as text: its instant, camera pose and zoom. The sensor's noise
+    is drawn from it (with the run's seed), as Cycles' own noise depends only on the
+    seed and the scene, so a frame is the same wherever it stands in a sequence."""
+    pose = ",".join(f"{v:.9g}" for v in np.asarray(shot.cam_pose, float).reshape(16))
+    return f"{shot.when.isoformat()}|{pose}|{shot.lens.zoom:.9g}"
+
+
 def develop_shot(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCamera, lock,
                  seed: int = 0) -> tuple[np.ndarray, float, np.ndarray, float]:
     """The phone's picture of one linear render: (RGB uint8, gain, white balance, veil).
@@ -148,7 +156,7 @@ def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: 
     t0 = time.perf_counter()
     linear = bl.render()
     seconds = time.perf_counter() - t0
-    rgb, gain, wb, veil = develop_shot(bl, shot, linear, cam, lock, frame_seed(bl.scene.cycles.seed, name))
+    rgb, gain, wb, veil = develop_shot(bl, shot, linear, cam, lock, frame_seed(bl.scene.cycles.seed, shot_key(shot)))
     labels = frame_labels(shot, k, site, gain, veil, binding)
     labels["pointer_rows_px"] = bl.pointer_rows(shot.target, shot.cam_pose, k)
     labels["camera"]["white_balance"] = [float(v) for v in wb]
