@@ -128,7 +128,8 @@ class CyclesScene:
             if asset not in assets:
                 assets.add(asset)
                 first.append(tag)
-        for tag in first + [t for t in tags if t not in set(first)]:
+        leading = set(first)
+        for tag in first + [t for t in tags if t not in leading]:
             self.load(tag, update=False)
         self.bpy.context.view_layer.update()
 

@@ -344,7 +344,3 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         "instances": int(len(np.unique(ids[ids > 0]))),
         "annotations": labels.annotations(ids, ctx["tag_of"], ctx["category_of"]),
     }
-
-
-def worker_count(requested: int | None) -> int:
-    return max(1, requested or (os.cpu_count() or 1))
