@@ -13,7 +13,7 @@ from pathlib import Path
 
 import click
 
-from .builder.executors import EXECUTORS
+from .engine.executors import EXECUTORS
 from .errors import UserError
 
 SOURCES = click.option("--sources", type=click.Path(path_type=Path), default=Path("sources"),
@@ -80,7 +80,7 @@ def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cac
           cache_limit: str, memory_limit: str, explain: bool, as_json: bool, executor: str,
           scheduler: str | None):
     """Build the model packages and the scene."""
-    from .builder.cache import parse_size
+    from .engine.cache import parse_size
     from .builder.run import build as run_build, failure_lines
 
     try:
@@ -147,17 +147,18 @@ def run(scenario: Path, out: Path):
 @main.command()
 @click.argument("scenario", type=click.Path(path_type=Path), required=False)
 @click.option("--study", is_flag=True, help="the study's six light conditions on the main-tank gauge")
+@SOURCES
 @OUT
 @user_errors
-def render(scenario: Path | None, study: bool, out: Path):
+def render(scenario: Path | None, study: bool, sources: Path, out: Path):
     """Render image sets with labels and the study's image metrics."""
-    from .runtime.render.scenario import render_scenario
-    from .runtime.render.study import render_study
+    from .render.scenario import render_scenario
+    from .render.study import render_study
 
     if study:
-        render_study(out)
+        render_study(out, sources)
     elif scenario is not None:
-        render_scenario(scenario, out)
+        render_scenario(scenario, out, sources)
     else:
         raise click.UsageError("give a SCENARIO or --study")
 
@@ -180,11 +181,11 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
             workers: int):
     """Render a labelled image set (images, instance masks, depth, COCO, frames.jsonl)
     from the built scene OUT into OUT/datasets/<name>/; a stopped run resumes."""
-    from .runtime.render.dataset import dask_frames, run_dataset
+    from .datasets.run import dask_frames, run_dataset
 
     pool = None
     if executor == "dask":
-        from .builder.dask_executor import dask_executor
+        from .engine.dask_executor import dask_executor
 
         pool = dask_frames(dask_executor, scheduler)
     folder = run_dataset(config, out, frames=frames, pool=pool, executor=executor, workers=workers, sources=sources)
@@ -195,13 +196,14 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
 @click.argument("dataset_folder", type=click.Path(path_type=Path))
 @click.option("--out", type=click.Path(path_type=Path), default=None,
               help="build folder whose reports/ receive the report (default: the dataset's own build)")
+@SOURCES
 @user_errors
-def baseline(dataset_folder: Path, out: Path | None):
+def baseline(dataset_folder: Path, out: Path | None, sources: Path):
     """The study's gauge reader over a dataset's conditions: reading error against sun
     elevation and local time, into OUT/reports/baseline_<name>.json and .html."""
-    from .runtime.render.baseline import run_baseline
+    from .perception.baseline import run_baseline
 
-    click.echo(str(run_baseline(dataset_folder, out)))
+    click.echo(str(run_baseline(dataset_folder, out, sources=sources)))
 
 
 @main.command()

@@ -171,7 +171,7 @@ def mesh_findings(mesh: ir.Mesh, site: str, *, collision: bool = False, memo=Non
     """Geometry checks of one mesh. Topology is judged on positions welded exactly, as
     an STL's triangle soup means it (unwelded facets are not holes).
 
-    `memo` (builder.memo.ArrayMemo, under this module's code version): the findings of
+    `memo` (engine.memo.ArrayMemo, under this module's code version): the findings of
     a mesh checked before, by its content, so the geometry task's per-part checks and
     the package's checks of the same meshes run once; what comes back is what the
     check finds. Every mesh is kept: a look-up costs less than checking even a small

@@ -3,7 +3,7 @@ worker has a core to spare.
 
 A cold build keeps every core busy with tasks of its own; an edit that reruns one
 asset's chain leaves all but one idle. The scheduler tells each worker its share of
-the cores (`SHARE_VARIABLE`, see builder.executors.init_worker); with more than one, `beside`
+the cores (`SHARE_VARIABLE`, see engine.worker.init_worker); with more than one, `beside`
 runs a task's second part in a forked child while the first runs here, and `spread`
 runs each part after the first in a child of its own. Forking hands a child the
 task's data without pickling it; only the child's result comes back.

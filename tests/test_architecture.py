@@ -128,3 +128,80 @@ def test_no_module_over_600_lines():
     long = {str(p.relative_to(PIPELINE.parent)): n for p in _modules()
             if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
     assert not long, f"over {MAX_LINES} lines: {long}"
+
+
+# --- modules, the engine, perception ---------------------------------------------
+
+# What the engine may import: the modules that know no domain (errors, files, digests
+# and fork_join's share of the cores). A task's domain reaches it only through the
+# task's action, which the builder hands it.
+ENGINE_MAY_IMPORT = {"engine", "errors", "files", "digest", "fork_join"}
+
+
+@lru_cache(maxsize=1)
+def module_graph() -> dict[str, set[str]]:
+    """{module: the pipeline modules it imports}, packages' __init__ included; an
+    imported name that is not a module counts as its module."""
+    modules = {_dotted(p) for p in _modules()}
+    graph: dict[str, set[str]] = {}
+    for path in _modules():
+        name = _dotted(path)
+        targets = set()
+        for imp in imported(path):
+            while imp and imp not in modules:
+                imp = imp.rpartition(".")[0]
+            if imp and imp != name:
+                targets.add(imp)
+        graph[name] = targets
+    return graph
+
+
+def _is_package_of(a: str, b: str) -> bool:
+    return b.startswith(a + ".")
+
+
+def test_no_import_circle_between_modules():
+    """No two modules import each other through any chain (a package's __init__ importing
+    its own modules is how a package is made, not a circle)."""
+    graph = {m: {t for t in ts if not _is_package_of(t, m) and not _is_package_of(m, t)}
+             for m, ts in module_graph().items()}
+    found = cycles({m: {t: [] for t in ts} for m, ts in graph.items()})
+    assert not found, f"module circles: {found}"
+    assert cycles({"p.a": {"p.b": []}, "p.b": {"p.a": []}}) == [["p.a", "p.b"]]
+
+
+def test_the_engine_imports_no_domain_folder():
+    graph = unit_graph()
+    extra = {u: edges for u, edges in graph["engine"].items() if u not in ENGINE_MAY_IMPORT}
+    assert not extra, f"engine imports {sorted(extra)}: {[e for edges in extra.values() for e in edges]}"
+
+
+def _imports_bpy(path: Path) -> bool:
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+            [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+        if any(n == "bpy" or n.startswith("bpy.") for n in names):
+            return True
+    return False
+
+
+def reaches(start: str, graph: dict[str, set[str]]) -> set[str]:
+    seen, todo = set(), [start]
+    while todo:
+        m = todo.pop()
+        for t in graph.get(m, ()):
+            if t not in seen:
+                seen.add(t)
+                todo.append(t)
+    return seen
+
+
+def test_perception_reaches_no_module_that_imports_bpy():
+    """The reader and the baseline run where Blender is not installed: nothing perception
+    imports, at any depth and inside functions too, imports bpy."""
+    graph = module_graph()
+    with_bpy = {_dotted(p) for p in _modules() if _imports_bpy(p)}
+    assert "pipeline.render.cycles" in with_bpy  # the check sees a lazy `import bpy`
+    bad = {m: sorted(reaches(m, graph) & with_bpy) for m in graph if m.startswith("pipeline.perception")}
+    bad = {m: b for m, b in bad.items() if b or m in with_bpy}
+    assert not bad, f"perception reaches bpy: {bad}"

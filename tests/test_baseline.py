@@ -14,10 +14,10 @@ import cv2
 import numpy as np
 import pytest
 
-from pipeline.runtime.render import gauge_reader as bl
-from pipeline.runtime.render.baseline import BINS, bin_of, write_report
-from pipeline.runtime.render.gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
-from pipeline.runtime.render.pinhole import intrinsics, look_at, project
+from pipeline.perception import gauge_reader as bl
+from pipeline.perception.baseline import BINS, bin_of, write_report
+from pipeline.perception.gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
+from pipeline.geometry.pinhole import intrinsics, look_at, project
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -222,7 +222,7 @@ zoom = [5.0, 7.0]
 def close_dataset(sample_build, tmp_path_factory) -> Path:
     """Three close-ups of reactor dials at midday, rendered beside the session's sample
     build (its models and scene linked, not copied)."""
-    from pipeline.runtime.render.dataset import run_dataset
+    from pipeline.datasets.run import run_dataset
 
     out = tmp_path_factory.mktemp("baseline") / "build"
     out.mkdir()

@@ -60,7 +60,7 @@ def test_bad_asset_yields_exactly_its_code(code):
 def test_findings_recalled_from_the_memo_are_the_findings_checked(code, tmp_path):
     """The per-mesh memo (shared by the geometry and package tasks) gives back what a
     check finds, at the site it is asked for; a damaged entry is checked again."""
-    from pipeline.builder.memo import ArrayMemo
+    from pipeline.engine.memo import ArrayMemo
 
     asset, kwargs = BAD.FIXTURES[code]()
     memo = ArrayMemo(tmp_path, "checks-v1")
@@ -77,7 +77,7 @@ def test_findings_recalled_from_the_memo_are_the_findings_checked(code, tmp_path
 
 
 def test_memo_findings_take_the_site_they_are_asked_for(tmp_path):
-    from pipeline.builder.memo import ArrayMemo
+    from pipeline.engine.memo import ArrayMemo
 
     box = box_mesh()
     inward = ir.Mesh(box.vertices, box.faces[:, ::-1])  # every face turned over: GEOM005

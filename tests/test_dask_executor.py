@@ -30,8 +30,8 @@ except ImportError:
 import psutil
 
 from pipeline.builder import run
-from pipeline.builder.dask_executor import BuildExecutor, dask_executor, dask_pool, worn_out
-from pipeline.builder.scheduler import Scheduler
+from pipeline.engine.dask_executor import BuildExecutor, dask_executor, dask_pool, worn_out
+from pipeline.engine.scheduler import Scheduler
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -160,7 +160,7 @@ def upper_and_limits(staging: Path, src: str, name: str, delay: float = 0.0) -> 
 
 def test_workers_are_set_up_as_the_local_pools(src, tmp_path, monkeypatch):
     """Thread variables, the address-space limit, and each one-core task on a CPU of
-    its own (a task alone on all of the build's), as executors.init_worker sets them."""
+    its own (a task alone on all of the build's), as worker.init_worker sets them."""
     monkeypatch.delenv("OMP_NUM_THREADS", raising=False)
     out = tmp_path / "build"
     graph = toy_graph.tasks(src, out, delay=0.05)  # both uppers run at once
@@ -181,8 +181,8 @@ def test_ctrl_c_closes_the_cluster(src, tmp_path):
     """SIGINT to the build's process group (as the terminal's Ctrl-C) while tasks
     run: the build ends and no worker process outlives it."""
     out = tmp_path / "build"
-    script = ("import sys, toy_graph; from pathlib import Path; from pipeline.builder.scheduler import Scheduler; "
-              "from pipeline.builder.dask_executor import dask_pool; "
+    script = ("import sys, toy_graph; from pathlib import Path; from pipeline.engine.scheduler import Scheduler; "
+              "from pipeline.engine.dask_executor import dask_pool; "
               "src, out = Path(sys.argv[1]), Path(sys.argv[2]); "
               "Scheduler(out, jobs=2, executor=dask_pool).run(toy_graph.tasks(src, out, delay=2.0))")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "tests"), str(ROOT)])}

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import UserError
-from pipeline.runtime.render import dataset_config
+from pipeline.datasets import config as dataset_config
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -125,8 +125,8 @@ def test_frames_beyond_the_configs_count_are_refused(tmp_path):
 
 @pytest.mark.slow
 def test_frame_i_is_the_same_whatever_came_before(sample_build, tmp_path):
-    from pipeline.runtime.render.dataset_plan import Planner
-    from pipeline.runtime.render.site import load_site
+    from pipeline.datasets.plan import Planner
+    from pipeline.runtime.site import load_site
 
     cfg = dataset_config.load(_config(tmp_path, TINY.replace("count = 4", "count = 40")))
     site = load_site(sample_build, ROOT / "sources")
@@ -263,7 +263,7 @@ def test_frames_render_when_the_calling_process_imported_bpy(sample_build, tmp_p
     holds Blender's scripts/modules and its pure-Python `bpy` package (pytest imports bpy
     in-process for the .blend tests before it gets here)."""
     script = ("import sys; from pathlib import Path; import bpy; "
-              "from pipeline.runtime.render.dataset import run_dataset; "
+              "from pipeline.datasets.run import run_dataset; "
               "print(run_dataset(sys.argv[1], Path(sys.argv[2]), frames=1, sources=Path(sys.argv[3])))")
     out = _scene_copy(sample_build, tmp_path / "b")
     proc = subprocess.run([sys.executable, "-c", script, str(_config(tmp_path)), str(out), str(ROOT / "sources")],

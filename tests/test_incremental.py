@@ -257,7 +257,8 @@ def test_each_task_kind_is_keyed_on_its_own_action_and_not_on_the_planner(tmp_pa
     """A task's code version is its action's module and what that imports (an edit
     of it reruns those tasks); the planner and the other kinds' actions are in none
     (an edit of plan() reruns nothing)."""
-    from pipeline.builder import code, tasks
+    from pipeline.engine import code
+    from pipeline.builder import tasks
 
     for module in ACTION_MODULES.values():
         used = set(code.modules_used(module))
@@ -275,7 +276,7 @@ def test_a_task_key_changes_with_the_modules_it_imports_and_no_other(tmp_path):
     """In a copy of the package: an edit of a module a task reaches through its
     imports (directly, transitively, a package's __init__) changes that task's code
     version; an edit of a module it does not reach leaves it as it was."""
-    from pipeline.builder import code
+    from pipeline.engine import code
 
     shutil.copytree(ROOT / "pipeline", tmp_path / "pipeline", ignore=shutil.ignore_patterns("__pycache__"))
     kinds = ("source", "geometry", "asset", "scene", "tiles", "viewer:libs")
@@ -304,11 +305,11 @@ def test_a_task_key_changes_with_the_modules_it_imports_and_no_other(tmp_path):
 
 
 def test_the_import_scan_finds_every_import_a_full_parse_does():
-    """builder.code reads import statements without parsing whole modules: in every
+    """engine.code reads import statements without parsing whole modules: in every
     pipeline module it finds each import statement ast.walk finds."""
     import ast
 
-    from pipeline.builder.code import import_statements
+    from pipeline.engine.code import import_statements
 
     for path in sorted((ROOT / "pipeline").rglob("*.py")):
         text = path.read_text()

@@ -677,7 +677,7 @@ def test_saved_shape_key_values_make_the_rest_mesh_unless_a_binding_drives_them(
 @corpus
 def test_a_file_from_a_newer_blender_is_read_with_a_warning_that_reaches_the_user(tmp_path):
     from pipeline.builder.run import source_warnings
-    from pipeline.builder.scheduler import BuildReport
+    from pipeline.engine.scheduler import BuildReport
     from pipeline.builder.source_task import build_source
     from pipeline.ingest.blend import header_version
     from pipeline.validate.checks import check_asset

@@ -433,7 +433,8 @@ def test_running_out_of_memory_tessellating_names_the_asset_and_the_knob(tmp_pat
 
 
 def test_workers_run_under_the_memory_limit(tmp_path):
-    from pipeline.builder.executors import Workers, default_memory, local_pool, memory_limit, run_task
+    from pipeline.engine.executors import local_pool
+    from pipeline.engine.worker import Workers, default_memory, memory_limit, run_task
 
     pool = local_pool(Workers(1, 1, (), 6 << 30))
     try:
@@ -446,7 +447,7 @@ def test_workers_run_under_the_memory_limit(tmp_path):
 
 
 def _limit_of_this_process(staging) -> dict:
-    from pipeline.builder.executors import memory_limit
+    from pipeline.engine.worker import memory_limit
 
     return {"limit": memory_limit()}
 

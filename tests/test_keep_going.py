@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 import toy_graph
-from pipeline.builder.executors import in_process
-from pipeline.builder.scheduler import Scheduler
+from pipeline.engine.executors import in_process
+from pipeline.engine.scheduler import Scheduler
 from pipeline.errors import UserError
 
 ROOT = Path(__file__).resolve().parents[1]

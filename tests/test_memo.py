@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from pipeline.builder.cache import Cache
-from pipeline.builder.memo import ArrayMemo
+from pipeline.engine.cache import Cache
+from pipeline.engine.memo import ArrayMemo
 
 
 def test_round_trip_is_exact_and_namespaced(tmp_path):
@@ -82,7 +82,7 @@ def test_collada_documents_from_the_file_memo_are_the_documents_written(tmp_path
 
     from fixtures_assets import articulated_asset
     from pipeline import ir
-    from pipeline.builder.memo import FileMemo
+    from pipeline.engine.memo import FileMemo
     from pipeline.export import collada
 
     asset = articulated_asset()
@@ -112,7 +112,7 @@ def test_collada_documents_from_the_file_memo_are_the_documents_written(tmp_path
 
 def test_a_file_memo_that_cannot_link_keeps_nothing_and_the_files_are_written(tmp_path):
     from fixtures_assets import articulated_asset
-    from pipeline.builder.memo import FileMemo
+    from pipeline.engine.memo import FileMemo
     from pipeline.export import collada
 
     (tmp_path / "file").write_text("a file where the cache folder would be")

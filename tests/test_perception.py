@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.runtime import perception as P
+from pipeline.perception import metrics as P
 
 WHITE, BLACK, RED, DARK, GREY = (255, 255, 255), (0, 0, 0), (0, 0, 255), (20, 20, 20), (128, 128, 128)
 

@@ -7,7 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.runtime.render import gauge, pinhole, sensor, study
+from pipeline.perception import gauge
+from pipeline.geometry import pinhole
+from pipeline.render import sensor, study
 from pipeline.bench import render as bench_render
 
 
@@ -149,7 +151,8 @@ def test_sensor_noise_is_seeded_and_grows_with_the_signal():
 DEVELOP_SCRIPT = """
 import hashlib, sys
 import numpy as np
-from pipeline.runtime.render import pinhole, sensor
+from pipeline.geometry import pinhole
+from pipeline.render import sensor
 k = pinhole.intrinsics(1.047 / 45, 320, 240)
 pose = pinhole.look_at((0.0, 0.0, 1.6), (0.0, 50.0, 1.6))
 scene = np.random.default_rng(5).random((240, 320, 3)) * 16.0

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from pipeline.runtime import camera, nodes, sun
+from pipeline.runtime import camera, nodes
+from pipeline import sun
 
 LAT, LON = -12.7, -38.3
 UTC = dt.timezone.utc
@@ -209,14 +211,16 @@ def test_the_study_runs_on_the_sites_clock(tmp_path):
     from zoneinfo import ZoneInfo
 
     from pipeline.errors import UserError
-    from pipeline.runtime.render import site as render_site, study
+    from pipeline.runtime import site as render_site
+    from pipeline.render import study
 
     site = render_site.Site(tmp_path, [], {}, (31.0, 121.0, 0.0), "2025-06-21", zone=ZoneInfo("Asia/Shanghai"))
-    times = dict(study.study_times(site))
+    cfg = study.load_study(Path(__file__).resolve().parent.parent / "sources" / "study.toml")
+    times = dict(study.study_times(site, cfg))
     assert times["early_morning"].isoformat() == "2025-06-21T06:45:00+08:00"
     noon = times["solar_noon"]
     assert noon.utcoffset() == dt.timedelta(hours=8) and dt.time(11, 50) < noon.time() < dt.time(12, 5)
     assert sun.ephemeris(31.0, 121.0, noon)[0] > 80.0
     site.zone = None
     with pytest.raises(UserError, match=r"\[site\] timezone"):
-        study.study_times(site)
+        study.study_times(site, cfg)

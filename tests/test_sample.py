@@ -15,10 +15,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pipeline.runtime.render import frames, gauge, pinhole, sensor, study
-from pipeline.runtime.render import site as render_site
+from pipeline.render import frames, sensor, study
+from pipeline.perception import gauge
+from pipeline.geometry import pinhole
+from pipeline.runtime import site as render_site
 
 ROOT = Path(__file__).resolve().parent.parent
+SOURCES = ROOT / "sources"
+STUDY = study.load_study(SOURCES / "study.toml")
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender]
 
@@ -92,8 +96,8 @@ SMALL = sensor.PhoneCamera(width=128, height=96, samples=4)  # the history test'
 
 
 def test_frames_labels_and_determinism(sample, tmp_path):
-    site = render_site.load_site(sample)
-    shots = dict(study.study_shots(site))
+    site = render_site.load_site(sample, SOURCES)
+    shots = dict(study.study_shots(site, STUDY))
     night, noon = shots["midnight"], shots["early_morning"]  # the white dial in direct sun
     a = frames.render_shots(site, [noon], tmp_path / "a", cam=TINY, seed=7)[0]
     b = frames.render_shots(site, [noon], tmp_path / "b", cam=TINY, seed=7)[0]
@@ -114,24 +118,27 @@ def test_frames_labels_and_determinism(sample, tmp_path):
 
 def test_denoised_frame_is_the_same_in_a_fresh_process(sample, tmp_path):
     """OIDN on the CPU: a frame rendered in another process has the same pixels."""
-    site = render_site.load_site(sample)
-    noon = dict(study.study_shots(site))["solar_noon"]
+    site = render_site.load_site(sample, SOURCES)
+    noon = dict(study.study_shots(site, STUDY))["solar_noon"]
     assert TINY.render_denoise
     here = frames.render_shots(site, [noon], tmp_path / "here", cam=TINY, seed=3)[0]["sha256"]
-    script = ("import json, sys; from pathlib import Path; from pipeline.runtime.render import frames, sensor, site as s, study; "
-              "site = s.load_site(Path(sys.argv[1])); shot = dict(study.study_shots(site))['solar_noon']; "
+    script = ("import json, sys; from pathlib import Path; from pipeline.render import frames, sensor, study; "
+              "from pipeline.runtime import site as s; sources = Path(sys.argv[4]); "
+              "site = s.load_site(Path(sys.argv[1]), sources); "
+              "shot = dict(study.study_shots(site, study.load_study(sources / 'study.toml')))['solar_noon']; "
               "cam = sensor.PhoneCamera(**json.loads(sys.argv[3])); "
               "print('SHA', frames.render_shots(site, [shot], Path(sys.argv[2]), cam=cam, seed=3)[0]['sha256'])")
     proc = subprocess.run([sys.executable, "-c", script, str(sample), str(tmp_path / "there"),
-                           json.dumps(dataclasses.asdict(TINY))], capture_output=True, text=True, timeout=600)
+                           json.dumps(dataclasses.asdict(TINY)), str(SOURCES)],
+                          capture_output=True, text=True, timeout=600)
     there = next(x.split()[1] for x in proc.stdout.splitlines() if x.startswith("SHA "))
     assert here == there
 
 
 def test_a_frame_does_not_depend_on_the_frames_before_it(sample, tmp_path):
     """Night (lamps on, sun off), then noon: the noon frame equals noon rendered alone."""
-    site = render_site.load_site(sample)
-    shots = dict(study.study_shots(site))
+    site = render_site.load_site(sample, SOURCES)
+    shots = dict(study.study_shots(site, STUDY))
     alone = frames.render_shots(site, [shots["solar_noon"]], tmp_path / "a", cam=SMALL, seed=5, gain=1.0)
     after = frames.render_shots(site, [shots["midnight"], shots["solar_noon"], shots["midnight"]], tmp_path / "b",
                            cam=SMALL, seed=5, gain=1.0)
@@ -145,7 +152,7 @@ def test_study_table(sample, tmp_path):
 
     shutil.copytree(sample / "scene", tmp_path / "scene")
     (tmp_path / "models").symlink_to((sample / "models").resolve())
-    study.render_study(tmp_path, cam=sensor.PhoneCamera())  # the study's own frame: H needs its pixels
+    study.render_study(tmp_path, SOURCES, cam=sensor.PhoneCamera())  # the study's own frame: H needs its pixels
     report = json.loads((tmp_path / "reports" / "study.json").read_text())
     names = [c["condition"] for c in report["conditions"]]
     # A day's order from the first light in which the pointer is visible (H_ref).
@@ -182,8 +189,8 @@ def test_the_late_sun_lights_the_study_crop_from_its_side(sample):
     """The lens's glare on the study's own geometry: the late sun (outside the frame)
     lights the frame's corner towards it more than the far one, and the glare alone
     reaches the clip nowhere at the exposure a metered frame of the gauge gets."""
-    site = render_site.load_site(sample)
-    late = dict(study.study_shots(site))["late_afternoon"]
+    site = render_site.load_site(sample, SOURCES)
+    late = dict(study.study_shots(site, STUDY))["late_afternoon"]
     cam = sensor.PhoneCamera()
     k = pinhole.intrinsics(late.lens.hfov, cam.width, cam.height)
     u, v = pinhole.project(late.cam_pose[:3, 3][None, :] + late.sun_dir[None, :], late.cam_pose, k)[0]
@@ -200,12 +207,12 @@ def test_the_late_sun_lights_the_study_crop_from_its_side(sample):
 def test_study_viewpoint_faces_the_late_sun_with_a_clear_view(sample):
     """Bank B's gauges face ENE: the study camera looks WSW, the late sun within ~25 deg
     of its axis and not hidden by a built model."""
-    site = render_site.load_site(sample)
-    shots = dict(study.study_shots(site))
+    site = render_site.load_site(sample, SOURCES)
+    shots = dict(study.study_shots(site, STUDY))
     late = shots["late_afternoon"]
     axis = -late.cam_pose[:3, 2]
     assert math.degrees(math.acos(float(axis @ late.sun_dir))) < 25.0
     assert not study._blocked(site, late.cam_pose[:3, 3], late.sun_dir, 300.0)
-    cfg = study.load_study()
+    cfg = STUDY
     centre, normal = gauge.dial_world(site.pose(site.placement(cfg.target)))
     assert float(-axis @ normal) > math.cos(cfg.max_obliquity) - 1e-9

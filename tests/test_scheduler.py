@@ -50,7 +50,7 @@ def test_a_rerun_that_makes_the_same_bytes_stops_the_chain(src, tmp_path):
     graph = toy_graph.tasks(src, out)
     for t in graph:  # new code for both upper tasks, same output: join stays up to date
         t.code = "v2" if t.name.startswith("upper:") else t.code
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.scheduler import Scheduler
     r = Scheduler(out).run(graph)
     assert sorted(r.ran) == ["upper:a", "upper:b"]
     assert [e["changed"] for e in r.explanations if e["ran"]] == [["code"], ["code"]]
@@ -88,8 +88,8 @@ def test_shared_cache_fills_an_empty_build(src, tmp_path):
 def test_in_process_executor_makes_what_the_pool_makes(src, tmp_path):
     """The executor decides where tasks run, never what they make: the keys do not name
     it, so a pool build after an in-process one finds nothing to do."""
-    from pipeline.builder.executors import in_process
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.executors import in_process
+    from pipeline.engine.scheduler import Scheduler
 
     pool_out, here_out = tmp_path / "pool", tmp_path / "here"
     toy_graph.build(src, pool_out)
@@ -102,8 +102,8 @@ def test_in_process_executor_makes_what_the_pool_makes(src, tmp_path):
 
 
 def test_in_process_executor_reports_a_task_error_like_the_pool(src, tmp_path):
-    from pipeline.builder.executors import in_process
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.executors import in_process
+    from pipeline.engine.scheduler import Scheduler
 
     (src / "b.txt").unlink()  # upper:b's action fails reading it: a bug's trace, not a crash
     tasks = toy_graph.tasks(src, tmp_path / "build")
@@ -120,7 +120,7 @@ def test_any_concurrent_futures_executor_runs_the_graph(src, tmp_path, jobs):
     import threading
     from concurrent.futures import ThreadPoolExecutor
 
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.scheduler import Scheduler
 
     class Counting(ThreadPoolExecutor):
         def __init__(self, workers):
@@ -195,7 +195,7 @@ def test_second_concurrent_build_waits(src, tmp_path):
 @pytest.mark.parametrize("costly", ["a", "b"])
 def test_longest_task_starts_first(src, tmp_path, costly):
     """A worker takes the costliest ready task, whatever the names' order."""
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.scheduler import Scheduler
 
     graph = toy_graph.tasks(src, tmp_path / "build")
     for t in graph:
@@ -211,7 +211,8 @@ def test_a_worker_exits_before_the_exit_handlers_its_tasks_registered(tmp_path):
     (Blender's clean-up: a quarter of a second per worker, waited for at the end of
     every build); the worker's own quick exit stays the last handler registered, so it
     runs first and the others never do."""
-    from pipeline.builder.executors import Workers, local_pool, run_task
+    from pipeline.engine.executors import local_pool
+    from pipeline.engine.worker import Workers, run_task
 
     marker = tmp_path / "marker"
     pool = local_pool(Workers(count=1, threads=1))
@@ -222,9 +223,9 @@ def test_a_worker_exits_before_the_exit_handlers_its_tasks_registered(tmp_path):
 
 def test_thread_share_follows_what_can_run_side_by_side(src, tmp_path, monkeypatch):
     """Native thread pools: each worker gets cores / tasks that can start together."""
-    from pipeline.builder.graph import FileHasher, check_graph
-    from pipeline.builder.executors import init_worker
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.graph import FileHasher, check_graph
+    from pipeline.engine.worker import init_worker
+    from pipeline.engine.scheduler import Scheduler
     from pipeline.fork_join import SHARE_VARIABLE
 
     monkeypatch.setattr(os, "cpu_count", lambda: 4)
@@ -273,8 +274,8 @@ def test_build_given_fewer_cores_holds_its_workers_to_them(tmp_path):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from pipeline.builder.executors import init_worker
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.worker import init_worker
+    from pipeline.engine.scheduler import Scheduler
 
     usable = _affinity()
     assert Scheduler(tmp_path / "b", jobs=1)._cpus() == (usable[0],)
@@ -299,7 +300,7 @@ def test_a_one_core_task_keeps_to_a_cpu_of_its_own(src, tmp_path):
 def test_init_worker_in_a_main_process_keeps_its_exit_code():
     """Workers skip the interpreter's exit clean-up (os._exit); a main process that
     calls init_worker (a test does) must still exit with its own code."""
-    code = "import sys; from pipeline.builder.executors import init_worker; init_worker(1); sys.exit(3)"
+    code = "import sys; from pipeline.engine.worker import init_worker; init_worker(1); sys.exit(3)"
     proc = subprocess.run([sys.executable, "-c", code], cwd=HERE.parent, timeout=120)
     assert proc.returncode == 3
 
@@ -307,7 +308,7 @@ def test_init_worker_in_a_main_process_keeps_its_exit_code():
 def test_a_build_on_a_shared_cache_leaves_another_builds_temporary_entries(tmp_path):
     """Two build folders, one --cache: the second build to start must not sweep the
     entry the first is writing; once alone, a build sweeps what a killed one left."""
-    from pipeline.builder.cache import Cache
+    from pipeline.engine.cache import Cache
 
     root = tmp_path / "cache"
     with Cache(root).in_use():
@@ -321,7 +322,7 @@ def test_a_build_on_a_shared_cache_leaves_another_builds_temporary_entries(tmp_p
 
 def test_code_version_follows_the_pinned_libraries(monkeypatch):
     """A new pin of a geometry library reruns the tasks: its results are theirs."""
-    from pipeline.builder import code
+    from pipeline.engine import code
 
     pins = code.pinned_libraries()
     assert any(p.startswith("meshoptimizer==") for p in pins) and any(p.startswith("bpy==") for p in pins)
@@ -358,7 +359,7 @@ def test_the_cache_keeps_within_its_limit_dropping_what_was_used_longest_ago(src
 
 
 def test_pruning_drops_the_least_recently_used_first_and_counts_linked_files_once(tmp_path):
-    from pipeline.builder.cache import MEMO_FOLDER, Cache
+    from pipeline.engine.cache import MEMO_FOLDER, Cache
 
     cache = Cache(tmp_path / "cache")
     for i, key in enumerate(["aa01", "aa02", "bb03"]):
@@ -386,8 +387,8 @@ def test_the_cache_is_walked_only_when_what_it_holds_may_be_over_its_limit(tmp_p
     only when that total is over the limit."""
     import numpy as np
 
-    from pipeline.builder.cache import Cache
-    from pipeline.builder.memo import ArrayMemo
+    from pipeline.engine.cache import Cache
+    from pipeline.engine.memo import ArrayMemo
 
     cache = Cache(tmp_path / "cache")
 
@@ -414,7 +415,7 @@ def test_the_cache_is_walked_only_when_what_it_holds_may_be_over_its_limit(tmp_p
 
 
 def test_pruning_waits_for_a_cache_no_other_build_uses(tmp_path):
-    from pipeline.builder.cache import Cache
+    from pipeline.engine.cache import Cache
 
     staging = tmp_path / "staging"
     staging.mkdir()
@@ -428,7 +429,7 @@ def test_pruning_waits_for_a_cache_no_other_build_uses(tmp_path):
 
 
 def test_cache_limit_sizes():
-    from pipeline.builder.cache import parse_size
+    from pipeline.engine.cache import parse_size
 
     assert parse_size("2G") == 2 << 30 and parse_size("500M") == 500 << 20 and parse_size("64kb") == 64 << 10
     assert parse_size("0") == 0 and parse_size("1.5K") == 1536
@@ -443,8 +444,8 @@ def test_an_idle_worker_imports_ahead_what_the_waiting_tasks_will(src, tmp_path)
     workers are all busy, sends none."""
     from dataclasses import replace
 
-    from pipeline.builder.executors import InProcess
-    from pipeline.builder.scheduler import Scheduler
+    from pipeline.engine.executors import InProcess
+    from pipeline.engine.scheduler import Scheduler
 
     calls = []
 

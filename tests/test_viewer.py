@@ -276,7 +276,7 @@ def test_clock_offsets_follow_zoneinfo_to_the_second():
 
 
 def test_sun_table_is_the_runtime_ephemeris_at_its_samples():
-    from pipeline.runtime import sun
+    from pipeline import sun
 
     lat, lon = -12.7, -38.3
     start, count = sun_table.span(2025)
@@ -405,7 +405,7 @@ def test_viewer_draws_every_placement_without_errors(viewer_page, mini):
 
 
 def test_viewer_sun_is_the_runtime_ephemeris(viewer_page):
-    from pipeline.runtime import sun
+    from pipeline import sun
 
     result, _, inputs, _, data = viewer_page
     lat, lon = data["sun"]["latitude_deg"], data["sun"]["longitude_deg"]

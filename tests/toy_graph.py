@@ -11,8 +11,8 @@ import sys
 import time
 from pathlib import Path
 
-from pipeline.builder.graph import Task
-from pipeline.builder.scheduler import Scheduler
+from pipeline.engine.graph import Task
+from pipeline.engine.scheduler import Scheduler
 from pipeline.fork_join import SHARE_VARIABLE
 
 

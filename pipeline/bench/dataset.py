@@ -42,8 +42,8 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 
 def dataset_section(ctx: Context) -> dict:
-    from ..builder.dask_executor import dask_executor
-    from ..runtime.render.dataset import dask_frames, run_dataset
+    from ..engine.dask_executor import dask_executor
+    from ..datasets.run import dask_frames, run_dataset
 
     built = ctx.built or ctx.out
     source = ctx.sources / CONFIG

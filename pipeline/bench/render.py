@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime.render.cycles import CyclesScene
-from ..runtime.render.frames import pointer_binding, populate
-from ..runtime.render.sensor import PhoneCamera, develop, metered_gain, metered_white_balance
-from ..runtime.render.site import load_site
-from ..runtime.render.study import study_shots
+from ..render.cycles import CyclesScene
+from ..render.frames import pointer_binding, populate
+from ..render.sensor import PhoneCamera, develop, metered_gain, metered_white_balance
+from ..runtime.site import load_site
+from ..render.study import load_study, study_shots
 
 # CyclesScene renders at Blender's factory light paths; the peer and the reference differ
 # from ours only in their samples and denoiser.
@@ -32,7 +32,7 @@ def frame_error(linear: np.ndarray, reference: np.ndarray, cam: PhoneCamera) -> 
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
-def bench_render(out="build", repeats: int = 5, threads: int | None = None, sources: Path | None = None,
+def bench_render(out, repeats: int = 5, threads: int | None = None, *, sources: Path,
                  setup: str = "ours", reference: Path | None = None) -> dict:
     """Seconds per 320x240 frame of the study's gauge close-up at solar noon: the scene is
     loaded once (load_s), then `repeats` frames re-render it (render_s: Cycles alone;
@@ -44,7 +44,7 @@ def bench_render(out="build", repeats: int = 5, threads: int | None = None, sour
     error against it is reported too (frame_error)."""
     site = load_site(Path(out), sources)
     cam = {"ours": PhoneCamera(), "blender_defaults": PEER_CAMERA, "reference": REFERENCE_CAMERA}[setup]
-    shot = dict(study_shots(site))["solar_noon"]
+    shot = dict(study_shots(site, load_study(Path(sources) / "study.toml")))["solar_noon"]
     bl = CyclesScene(site, cam, 1)
     if threads:
         bl.scene.render.threads = threads

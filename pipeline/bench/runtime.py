@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..runtime import graph, nodes, sun
+from ..runtime import graph, nodes
+from .. import sun
 
 LAT, LON = -12.7, -38.3  # the sun node of the sample graph (its cost does not depend on where)
 START = dt.datetime(2025, 3, 20, 12, 0, tzinfo=dt.timezone.utc)

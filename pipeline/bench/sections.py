@@ -134,7 +134,7 @@ def georef_section(ctx: Context) -> dict:
 def sun_section(ctx: Context, runtime: dict | None) -> dict:
     """The study's theta = 90 sin(pi tau) against astral's ephemeris over a year at the
     site: our own day x hour map (for the plot), plus the runtime bench's figures."""
-    from ..runtime import sun
+    from .. import sun
 
     site, _, g = _site(ctx.sources)
     lat, lon = g.origin_llh[0], g.origin_llh[1]

@@ -12,7 +12,7 @@ from .layout import ir_path, source_path
 # What build_geometry imports (most of it inside functions) and jsonschema for
 # asset.toml's check: a worker idle while the task waits imports them ahead, so the
 # task does not wait for its imports.
-WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
+WARM = ("pipeline.builder.irfile", "pipeline.engine.memo", "pipeline.geometry.collision", "pipeline.geometry.lod",
         "pipeline.findings", "pipeline.fork_join", "scipy.spatial", "fcpw", "igl", "meshoptimizer", "jsonschema")
 
 
@@ -42,11 +42,11 @@ def build_geometry(staging: Path, asset_toml: str, build: str, memo: str | None 
                    memo_namespace: str = "", checks_namespace: str = "") -> dict:
     """Task action: one asset's cleaned source through the geometry steps, written as
     an .ir file (the source task's findings carried along). `memo`: the cache folder
-    whose memo keeps the LOD search's levels (builder.memo), under `memo_namespace`
+    whose memo keeps the LOD search's levels (engine.memo), under `memo_namespace`
     (the task's code version), and the per-mesh checks' findings, under
     `checks_namespace` (theirs)."""
     from . import irfile
-    from .memo import ArrayMemo
+    from ..engine.memo import ArrayMemo
 
     cfg = config.load_asset_config(Path(asset_toml))
     asset, extra = irfile.read(Path(build) / source_path(cfg.id))

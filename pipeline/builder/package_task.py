@@ -13,7 +13,7 @@ from .layout import ir_path
 
 # what build_asset imports (mostly inside functions), and jsonschema for asset.toml's
 # check: an idle worker imports them ahead
-WARM = ("pipeline.builder.irfile", "pipeline.builder.memo", "pipeline.export.package", "pipeline.export.collada",
+WARM = ("pipeline.builder.irfile", "pipeline.engine.memo", "pipeline.export.package", "pipeline.export.collada",
         "pipeline.export.gltf", "pipeline.export.usd", "pipeline.export.sdf", "pipeline.export.thumbnail",
         "pipeline.export.manifest", "pipeline.validate.checks", "collada", "lxml.etree", "PIL.Image",
         "pxr.Usd", "pxr.UsdGeom", "pxr.UsdShade", "pxr.UsdPhysics", "pxr.UsdSkel", "jsonschema")
@@ -41,7 +41,7 @@ def build_asset(staging: Path, asset_toml: str, build: str, memo: str | None = N
     from ..findings import Finding, as_dicts
     from ..validate.checks import budget_findings, check_asset
     from . import irfile
-    from .memo import ArrayMemo, FileMemo
+    from ..engine.memo import ArrayMemo, FileMemo
 
     t = time.perf_counter()
     cfg = config.load_asset_config(Path(asset_toml))

@@ -5,9 +5,9 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from .cache import DEFAULT_LIMIT
-from .executors import ExecutorFactory, local_pool
-from .scheduler import BuildReport, Scheduler
+from ..engine.cache import DEFAULT_LIMIT
+from ..engine.executors import ExecutorFactory, local_pool
+from ..engine.scheduler import BuildReport, Scheduler
 from .tasks import plan
 
 

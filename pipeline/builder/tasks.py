@@ -4,7 +4,7 @@ terrain, the scene.
 `plan()` reads the sources and returns the task graph. The actions run in worker
 processes and write into the staging folder they are given (paths relative to
 build/, builder.layout); each kind has its module, and the text of that module and
-of every pipeline module it imports is that kind's code version (builder.code): an
+of every pipeline module it imports is that kind's code version (engine.code): an
 edit of the planning here reruns no task. An asset's chain is three tasks:
 
 - `source:<id>` (builder.source_task): read the source file and clean it ->
@@ -50,9 +50,9 @@ from pathlib import Path
 from .. import config, ir
 from ..errors import UserError
 from ..files import atomic_write
-from .code import code_of
+from ..engine.code import code_of
 from .geometry_task import WARM as GEOMETRY_WARM, build_geometry
-from .graph import Task
+from ..engine.graph import Task
 from .layout import IR_FOLDER, SOURCE_FOLDER
 from .libs_task import build_libs
 from .package_task import WARM as PACKAGE_WARM, build_asset
@@ -162,7 +162,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
     """The task graph for a sources folder. `only`: just these assets' packages;
     `cache`: the cache folder the build uses (default: in the build folder)."""
     from ..ingest.floorplan import MEMO_NAME, require_placements_and_platforms
-    from .cache import cache_root
+    from ..engine.cache import cache_root
 
     p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME)
     broken = {asset_of(e): e for e in p.problems}

@@ -12,7 +12,7 @@ def build_tiles(staging: Path, sources: str, build: str, memo: str | None = None
     packs (baked meshes) by its glb, under `memo_namespace` (the task's code)."""
     from .. import config
     from ..viewer import tiles
-    from .memo import ArrayMemo, FileMemo
+    from ..engine.memo import ArrayMemo, FileMemo
 
     site = config.load_site(Path(sources) / "site.toml")
     record, manifests = scene_inputs(Path(build))

@@ -12,7 +12,7 @@ def build_viewer(staging: Path, sources: str, build: str, memo: str | None = Non
     """Task action: viewer/ but its libraries. `memo`: the cache folder whose memo
     keeps the sun tables, under `memo_namespace` (their code)."""
     from ..viewer import page
-    from .memo import FileMemo
+    from ..engine.memo import FileMemo
 
     record, manifests = scene_inputs(Path(build))
     sun_memo = None if memo is None else FileMemo(Path(memo), memo_namespace)

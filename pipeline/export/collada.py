@@ -48,7 +48,7 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     Returns the package-relative paths written, sorted. A level that repeats a finer
     one's mesh (a part kept at a coarser level, a frozen visual: a large share of a
     site's LOD files) gets the finer level's bytes, not a second formatting.
-    `memo` (builder.memo.FileMemo, under the package code's version): documents an
+    `memo` (engine.memo.FileMemo, under the package code's version): documents an
     earlier build wrote, by what they hold; an edit that leaves a mesh as it was
     links its document instead of formatting it again.
     """

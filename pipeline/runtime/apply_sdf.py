@@ -28,7 +28,8 @@ from ..export import names, sdf
 from .. import safe_xml
 from ..files import atomic_write
 from ..geometry.transform import matrix_to_xyz_rpy
-from . import nodes, sun as sunmod
+from . import nodes
+from .. import sun as sunmod
 
 
 def _f(v: float) -> str:

@@ -20,7 +20,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import camera, sun
+from . import camera
+from .. import sun
 
 
 @dataclass(frozen=True)

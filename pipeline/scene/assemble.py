@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import math
 from pathlib import Path
 
 import numpy as np
 
 from .. import config, glb
+from .. import sun as sun_model
 from ..fork_join import beside
 from ..export import names
 from . import placements as placing
@@ -40,19 +42,13 @@ def _load(sources: Path, build: Path | None = None):
 
 
 def scene_sun(site: config.Site, origin_llh) -> dict:
-    """Sun of the built scene (the runtime moves it): astral's ephemeris at a fixed
-    local time on the site's date, in its [site] timezone; intensity scaled by the
-    study's clear-sky irradiance."""
-    from astral import Observer
-    from astral.sun import azimuth, elevation
-
+    """Sun of the built scene (the runtime moves it): the ephemeris at a fixed local
+    time on the site's date, in its [site] timezone, apparent (refracted) as an observer
+    sees it; intensity scaled by the study's clear-sky irradiance."""
     local = config.local_time(dt.datetime.combine(dt.date.fromisoformat(site.date), SUN_LOCAL_TIME), site.zone)
     when = local.astimezone(dt.timezone.utc)
-    obs = Observer(latitude=origin_llh[0], longitude=origin_llh[1])
-    el = float(elevation(obs, when))
-    az = float(azimuth(obs, when))
-    s = max(np.sin(np.radians(el)), 0.0)
-    irradiance = 1361.0 * np.exp(-0.2 / s) * s if s > 0 else 0.0
+    el, az = sun_model.ephemeris(origin_llh[0], origin_llh[1], when, refraction=True)
+    irradiance = sun_model.irradiance(math.radians(el))
     return {"elevation_deg": round(el, 9), "azimuth_deg": round(az, 9), "irradiance_w_m2": round(irradiance, 6),
             "intensity": round(irradiance / 1000.0, 6), "illuminance_lux": round(irradiance * 100.0, 3),
             "time_local": local.isoformat(), "time_utc": when.isoformat()}

@@ -1,7 +1,7 @@
 """The runtime's sun for the page, and the site's clock.
 
 The page does not compute the sun: it interpolates a table of the runtime's own
-ephemeris (runtime.sun.ephemeris, astral's NOAA model, geometric elevation) sampled
+ephemeris (sun.ephemeris, astral's NOAA model, geometric elevation) sampled
 at the site origin over the site's year. Samples are unit vectors towards the sun in
 ENU (float32, little-endian, (n, 3)); the page interpolates them with the cubic
 through the four nearest samples and normalises, which stays smooth where azimuth
@@ -33,7 +33,7 @@ def span(year: int) -> tuple[dt.datetime, int]:
 
 def directions(lat: float, lon: float, start: dt.datetime, count: int) -> np.ndarray:
     """(count, 3) float64 ENU unit vectors towards the sun at start + k STEP_S."""
-    from ..runtime import sun
+    from .. import sun
 
     out = np.empty((count, 3))
     for k in range(count):
@@ -71,7 +71,7 @@ def offsets(zone: zoneinfo.ZoneInfo, start: dt.datetime, end: dt.datetime) -> li
 
 def describe(lat: float, lon: float, year: int, zone: zoneinfo.ZoneInfo) -> dict:
     """What twin.json says about the table (file written beside it) and the clock."""
-    from ..runtime import sun
+    from .. import sun
 
     start, count = span(year)
     end = start + dt.timedelta(seconds=(count - 1) * STEP_S)

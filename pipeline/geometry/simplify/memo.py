@@ -13,7 +13,7 @@ from ...digest import sha256_arrays, sha256_json
 
 
 class Memo(Protocol):
-    """Where results are kept between runs, by key (builder.memo.ArrayMemo): arrays
+    """Where results are kept between runs, by key (engine.memo.ArrayMemo): arrays
     in, the same arrays out, or None for a key it does not hold."""
 
     def get(self, key: str) -> dict[str, np.ndarray] | None: ...

@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import sun as sun_model
-from .gauge import POINTER
-from .pinhole import look_at, project
+from ..perception.gauge import POINTER
+from ..geometry.pinhole import look_at, project
 from .sensor import PhoneCamera
-from .site import Shot, Site
+from ..runtime.site import Shot, Site
 
 class CyclesScene:
     """One Cycles scene: imported packages, lights, camera. Packages are imported once

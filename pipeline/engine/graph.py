@@ -62,7 +62,7 @@ class Task:
     deps:    names of tasks whose outputs this task reads (the digests of what they
              made enter this key).
     params:  JSON-serialisable parameters; enter the key as sorted JSON.
-    code:    code version of the steps the action runs (builder.code).
+    code:    code version of the steps the action runs (engine.code).
     outputs: paths relative to the build folder, each produced by this task alone.
     cost:    a scheduling hint only (longest first); it never changes what a task makes.
     warm:    modules the action imports: a worker that is idle while this task waits

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from .pinhole import project
+from ..geometry.pinhole import project
 
 # The main-tank dial (sources/authoring/ASSETS.md): centre and facing in the model frame.
 DIAL_CENTER = np.array([0.0, -1.80, 2.80])

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frames import measure
+from .metrics import measure
 from .gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
-from .pinhole import project
+from ..geometry.pinhole import project
 
 MIN_DIAL_PX = 24  # the face's projected minor axis below which a dial is counted, not read
 DARK_V = 80  # the study's pointer threshold on V (HSV, 0..255)

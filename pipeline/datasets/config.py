@@ -19,8 +19,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ...errors import UserError
-from .. import camera as camera_model
+from ..errors import UserError
+from ..runtime import camera as camera_model
 
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 KINDS = ("inspection_point", "route", "ptz")

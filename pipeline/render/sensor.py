@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .pinhole import project
+from ..geometry.pinhole import project
 
 SUN_HALF_ANGLE = 0.00465  # rad: the solar disc's angular radius
 SUN_SOLID_ANGLE = 2.0 * math.pi * (1.0 - math.cos(SUN_HALF_ANGLE))  # 6.8e-5 sr

@@ -11,15 +11,16 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import config
-from ...files import atomic_write
-from .. import camera as camera_model
+from .. import config
+from ..files import atomic_write
+from ..runtime import camera as camera_model
 from .. import sun as sun_model
-from .frames import measure, render_shots, write_json
-from .gauge import FACE_RADIUS, dial_outline, dial_world
-from .pinhole import intrinsics, look_at, project
+from ..perception.metrics import measure
+from .frames import render_shots, write_json
+from ..perception.gauge import FACE_RADIUS, dial_outline, dial_world
+from ..geometry.pinhole import intrinsics, look_at, project
 from .sensor import PhoneCamera
-from .site import Shot, Site, load_site
+from ..runtime.site import Shot, Site, load_site
 
 CONFIG = "study.toml"  # in the sources folder
 NOON = "solar_noon"  # a condition's time: the site's solar noon on its date
@@ -42,12 +43,12 @@ class StudyConfig:
 _KEYS = {"target", "zoom", "distance_m", "max_obliquity_deg", "faces_sun_of", "seed", "conditions"}
 
 
-def load_study(path: Path | None = None) -> StudyConfig:
-    """Read and check study.toml (default: the repository's sources/study.toml); a
-    UserError names the file and the key."""
-    from ...errors import UserError
+def load_study(path: Path) -> StudyConfig:
+    """Read and check a study.toml (SOURCES/study.toml); a UserError names the file
+    and the key."""
+    from ..errors import UserError
 
-    path = Path(path) if path else Path(__file__).resolve().parents[3] / "sources" / CONFIG
+    path = Path(path)
     data = config.read_toml(path)
     unknown = sorted(set(data) - _KEYS)
     if unknown:
@@ -78,7 +79,7 @@ def load_study(path: Path | None = None) -> StudyConfig:
 
 
 def _conditions(path: Path, raw) -> tuple[tuple[str, str], ...]:
-    from ...errors import UserError
+    from ..errors import UserError
 
     if not isinstance(raw, list) or not raw:
         raise UserError(path, "conditions", "missing: one [[conditions]] table per condition (name, time)")
@@ -104,13 +105,12 @@ def _hhmm(text: str) -> dt.time | None:
         return None
 
 
-def study_times(site: Site, cfg: StudyConfig | None = None) -> list[tuple[str, dt.datetime]]:
+def study_times(site: Site, cfg: StudyConfig) -> list[tuple[str, dt.datetime]]:
     import astral
     import astral.sun
 
-    from ...errors import UserError
+    from ..errors import UserError
 
-    cfg = cfg or load_study()
     if site.zone is None:
         raise UserError(site.build / "scene" / "placements.json", "timezone",
                         "the study's local times need the site's time zone: site.toml [site] timezone, then rebuild")
@@ -188,14 +188,13 @@ def study_viewpoint(site: Site, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray
     return look_at(best[3], centre)
 
 
-def study_shots(site: Site, cfg: StudyConfig | None = None, *,
+def study_shots(site: Site, cfg: StudyConfig, *,
                 tau_atm: float = sun_model.DEFAULT_TAU_ATM) -> list[tuple[str, Shot]]:
     """The study's shots (PAPER_NOTES.md): same camera, one instant per condition; the
     tank level follows the study's leak trace over the sequence so H has something to
     follow."""
-    from ...errors import UserError
+    from ..errors import UserError
 
-    cfg = cfg or load_study()
     if not any(p["tag"] == cfg.target for p in site.placements) \
             or site.placement(cfg.target)["asset"] not in site.manifests:
         raise UserError(cfg.path, "target", f"{cfg.target!r} is not a built placement of {site.build}")
@@ -217,7 +216,7 @@ def study_shots(site: Site, cfg: StudyConfig | None = None, *,
 
 
 def _tank_shot(site, target, when, pose, lens, e, a, g, level) -> Shot:
-    from .. import nodes
+    from ..runtime import nodes
 
     p = site.placement(target)
     ob = nodes.Observed(p["tag"], p.get("state"), p["asset"], site.manifests[p["asset"]])
@@ -247,13 +246,13 @@ def face_only(bgr_crop: np.ndarray, site: Site, shot: Shot, cam: PhoneCamera, of
     return out
 
 
-def render_study(out, *, cam: PhoneCamera | None = None, sources: Path | None = None) -> Path:
+def render_study(out, sources: Path, *, cam: PhoneCamera | None = None) -> Path:
     """`twin render --study`: the conditions of sources/study.toml, metrics C, S, H on
     the gauge ROI set against the study's Table 1, out/reports/study.html + study.json,
     frames in out/reports/study/."""
     cam = cam or PhoneCamera()
     out = Path(out)
-    cfg = load_study(Path(sources) / CONFIG if sources else None)
+    cfg = load_study(Path(sources) / CONFIG)
     site = load_site(out, sources)
     shots = study_shots(site, cfg)
     folder = out / "reports" / "study"

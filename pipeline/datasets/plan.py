@@ -14,14 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import config
-from ...errors import UserError
-from .. import camera as camera_model
+from .. import config
+from ..errors import UserError
+from ..runtime import camera as camera_model
 from .. import sun as sun_model
-from .dataset_config import Camera, DatasetConfig
-from .gauge_reader import dial_of
-from .pinhole import cull, intrinsics, look_at
-from .site import Shot, Site
+from .config import Camera, DatasetConfig
+from ..perception.gauge_reader import dial_of
+from ..geometry.pinhole import cull, intrinsics, look_at
+from ..runtime.site import Shot, Site
 
 MAST_EYE_ABOVE_TILT_M = 0.15  # the PTZ head's lens above its tilt axis
 
@@ -87,7 +87,7 @@ class Planner:
 
     def _route(self, c: Camera, i: int, sources: Path) -> np.ndarray:
         """(n, 3) ENU vertices of a route polyline, `height` above its level."""
-        from ...georef import Georeferencer
+        from ..georef import Georeferencer
 
         cfg = config.load_site(sources / "site.toml")
         try:
@@ -184,7 +184,7 @@ class Planner:
         return (self.site.pose(p) @ np.r_[local, 1.0])[:3]
 
     def _states(self, rng: np.random.Generator):
-        from .. import nodes
+        from ..runtime import nodes
 
         lo, hi = self.cfg.states.oil_level
         oil, values, observed = {}, {}, []

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import config
-from .. import camera as camera_model
+from .. import config
+from . import camera as camera_model
 from .. import sun as sun_model
 
 @dataclass
@@ -55,9 +55,9 @@ class Site:
         return out
 
 
-def load_site(build: Path, sources: Path | None = None) -> Site:
-    from ...errors import UserError
-    from ...export import manifest as manifest_io
+def load_site(build: Path, sources: Path) -> Site:
+    from ..errors import UserError
+    from ..export import manifest as manifest_io
 
     build = Path(build)
     index = build / "scene" / "placements.json"
@@ -76,7 +76,7 @@ def load_site(build: Path, sources: Path | None = None) -> Site:
     terrain = data.get("terrain")
     if terrain and (build / "models" / terrain / f"{terrain}.glb").is_file():
         site.terrain = terrain
-    sources = Path(sources) if sources else Path(__file__).resolve().parents[3] / "sources"
+    sources = Path(sources)
     if (sources / "site.toml").is_file():
         _add_site_toml(site, sources / "site.toml")
     return site
@@ -84,8 +84,8 @@ def load_site(build: Path, sources: Path | None = None) -> Site:
 
 def _add_site_toml(site: Site, path: Path) -> None:
     """Inspection points in ENU through the same georeferencer the build used."""
-    from ...georef import Georeferencer
-    from ...scene.placements import inspection_points_enu
+    from ..georef import Georeferencer
+    from ..scene.placements import inspection_points_enu
 
     cfg = config.load_site(path)
     site.date, site.zone = cfg.date, cfg.zone

@@ -35,12 +35,10 @@ import uuid
 from concurrent.futures import CancelledError, Executor, Future
 from contextlib import contextmanager, nullcontext
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import Callable, Iterator
 
 from ..errors import UserError
-
-if TYPE_CHECKING:  # executors names this module's factory in its table: its names are imported where used
-    from .executors import Workers
+from .worker import THREAD_VARIABLES, Workers, init_worker, run_task
 
 INSTALL_HINT = "dask.distributed is not installed: .venv/bin/pip install -e . (it is a dependency)"
 
@@ -142,7 +140,7 @@ def _worker_plugin_class():
 
     class Setup(WorkerPlugin):
         """What each worker does when it starts (a restarted one too): the local pool's
-        set-up (executors.init_worker) when `threads` is given, then `preload`
+        set-up (worker.init_worker) when `threads` is given, then `preload`
         imported once. `local`: the workers are this machine's, named 0..n-1 by the
         LocalCluster: each keeps to its own CPU on one-core tasks as a local pool's
         worker does, and leaves Ctrl-C to the build, which closes the cluster (the
@@ -157,7 +155,6 @@ def _worker_plugin_class():
             self.local = local
 
         def setup(self, worker):
-            from .executors import init_worker
 
             if self.threads is not None:
                 slot = _Slot(worker.name) if self.local and isinstance(worker.name, int) else None
@@ -264,7 +261,7 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
           retries: int = 1, executor_class: type[DaskExecutor] = DaskExecutor) -> DaskExecutor:
     """A DaskExecutor on a new LocalCluster of `workers` processes (no `scheduler`) or
     on the cluster at `scheduler`. `threads`: each worker's native thread pools and
-    fork_join.beside share (executors.init_worker, with `cpus` and `address_space`);
+    fork_join.beside share (worker.init_worker, with `cpus` and `address_space`);
     `memory`: bytes a worker may hold (the nanny's limit on a LocalCluster, and the
     recycling rule everywhere); `retries`: workers a LocalCluster lets a call's death
     cost after the first before it fails with KilledWorker."""
@@ -273,7 +270,6 @@ def start(workers: int, scheduler: str | None = None, *, threads: int | None = N
         from distributed import Client, LocalCluster
     except ImportError:
         raise UserError("--executor dask", None, INSTALL_HINT) from None
-    from .executors import THREAD_VARIABLES
 
     Setup = _worker_plugin_class()
     plugin = Setup(threads, cpus, address_space, tuple(preload), local=scheduler is None)
@@ -339,14 +335,12 @@ class BuildExecutor(DaskExecutor):
     worker died elsewhere, and what the dead attempt left must not enter the cache."""
 
     def submit(self, fn, /, *args, **kwargs) -> Future:
-        from .executors import run_task
 
         return super().submit(run_afresh if fn is run_task else fn, *args, **kwargs)
 
 
 def run_afresh(action, args: dict, staging: str, cores: int | None = None) -> dict:
-    """executors.run_task in a staging folder emptied first."""
-    from .executors import run_task
+    """worker.run_task in a staging folder emptied first."""
 
     shutil.rmtree(staging, ignore_errors=True)
     Path(staging).mkdir(parents=True)

@@ -4,7 +4,7 @@
   one whose key is in the cache is restored; the rest run in workers. A task's key
   is known once its dependencies are done: it holds the digest of what they made
   (graph.output_digest), so a rerun that made the same bytes stops there.
-- Tasks run on an executor (builder.executors; by default a pool of spawned
+- Tasks run on an executor (engine.executors; by default a pool of spawned
   workers that serve many tasks each); the scheduler tells it how many tasks run at
   once and each one's share of the cores (`_worker_setup`).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
@@ -32,7 +32,8 @@ from pathlib import Path
 from ..errors import UserError
 from ..files import atomic_write
 from .cache import DEFAULT_LIMIT, Cache, cache_root
-from .executors import ExecutorFactory, Workers, default_memory, local_pool, run_task, warm_up
+from .executors import ExecutorFactory, local_pool
+from .worker import Workers, default_memory, run_task, warm_up
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
 STATE_FILE = ".state.json"
@@ -437,7 +438,7 @@ def _pipes_ignored():
 
 
 def _as_failure(problem: Exception) -> dict:
-    """A planner's refusal as a worker's failure (executors.run_task)."""
+    """A planner's refusal as a worker's failure (worker.run_task)."""
     if isinstance(problem, UserError):
         return {"user_error": str(problem), "file": problem.file, "object": problem.obj, "message": problem.message}
     return {"error": f"{type(problem).__name__}: {problem}"}

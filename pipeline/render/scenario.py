@@ -6,19 +6,19 @@ from __future__ import annotations
 import datetime as dt
 from pathlib import Path
 
-from .. import camera as camera_model
+from ..runtime import camera as camera_model
 from .frames import render_shots, write_json
-from .gauge import dial_world
-from .pinhole import look_at
+from ..perception.gauge import dial_world
+from ..geometry.pinhole import look_at
 from .sensor import PhoneCamera
-from .site import Shot, Site, load_site
+from ..runtime.site import Shot, Site, load_site
 
 def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[object, list[Shot]]:
     """Run the scenario's graph and turn each (every-th) step into a Shot: camera at the
     inspection point whose target is the placement the render node drives, looking at
     its main-tank gauge; zoom, sun and states from the graph's nodes."""
-    from ...errors import UserError
-    from .. import graph, run
+    from ..errors import UserError
+    from ..runtime import graph, run
 
     scenario = graph.load_scenario(scenario_path, site.zone)
     observed = run.load_observed(site.build)
@@ -51,8 +51,7 @@ def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[obj
     return scenario, shots
 
 
-def render_scenario(scenario_path, out, *, cam: PhoneCamera | None = None, every: int = 1,
-                    sources: Path | None = None) -> Path:
+def render_scenario(scenario_path, out, sources: Path, *, cam: PhoneCamera | None = None, every: int = 1) -> Path:
     """`twin render SCENARIO`: frames, labels and a dataset manifest in
     out/runs/<scenario>/render/. Returns the manifest's path."""
     cam = cam or PhoneCamera()

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ...files import atomic_write
+from ..files import atomic_write
 from .cycles import CyclesScene
-from .gauge import POINTER, gauge_box, pointer_angle
-from .pinhole import cull, intrinsics
+from ..perception.gauge import POINTER, gauge_box, pointer_angle
+from ..geometry.pinhole import cull, intrinsics
 from .sensor import PhoneCamera, develop, frame_seed, lens_glare, metered_gain, metered_white_balance
-from .site import Shot, Site
+from ..runtime.site import Shot, Site
 
 def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, pointer_binding: dict | None) -> dict:
     """Labels of one frame: what was rendered, in numbers."""
@@ -39,20 +39,6 @@ def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, poin
         "pointer_angle_rad": pointer_angle(level, pointer_binding) if level is not None and pointer_binding else None,
         "gauges": gauges,
     }
-
-
-def measure(bgr_crop: np.ndarray, bgr_face: np.ndarray) -> dict:
-    """The study's C and S of a gauge crop and the pointer extent (px) on its dial face
-    alone (runtime/perception.py): the crop's corners hold bezel and its shadows, which
-    the region's convex hull would otherwise take for pointer pixels."""
-    import cv2
-
-    from .. import perception
-
-    gray = cv2.cvtColor(np.ascontiguousarray(bgr_crop), cv2.COLOR_BGR2GRAY)
-    h, w = bgr_face.shape[:2]
-    return {"C": perception.rms_contrast(gray), "S": perception.high_intensity_ratio(gray),
-            "extent_px": float(perception.pointer_height(bgr_face, (0, 0, w, h)))}
 
 
 def _sha(data: bytes) -> str:

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gauge_reader import Dial
-from .pinhole import project
+from ..perception.gauge_reader import Dial
+from ..geometry.pinhole import project
 
 # a dial is visible when the surface at its centre's pixel is its own placement's and
 # lies within this distance of the dial's centre along the view (the gauge glass, the

@@ -84,3 +84,13 @@ def oil_height_ratio(frames, roi: Roi) -> list[float]:
     if heights[0] == 0:
         raise ValueError("no pointer found in the first frame: H_ref is undefined")
     return [h / heights[0] for h in heights]
+
+
+def measure(bgr_crop: np.ndarray, bgr_face: np.ndarray) -> dict:
+    """The study's C and S of a gauge crop and the pointer extent (px) on its dial face
+    alone (pointer_height): the crop's corners hold bezel and its shadows, which
+    the region's convex hull would otherwise take for pointer pixels."""
+    gray = _cv2().cvtColor(np.ascontiguousarray(bgr_crop), _cv2().COLOR_BGR2GRAY)
+    h, w = bgr_face.shape[:2]
+    return {"C": rms_contrast(gray), "S": high_intensity_ratio(gray),
+            "extent_px": float(pointer_height(bgr_face, (0, 0, w, h)))}

@@ -27,10 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ...errors import UserError
-from ...files import atomic_write
-from .gauge_reader import (DARK_OF_FACE, DARK_V, MIN_DIAL_PX, READERS, SCORED, STATUS_READ, UNREADABLE, Dial,
-                           dial_of, score_gauge)
+from ..errors import UserError
+from ..files import atomic_write
+from .gauge_reader import DARK_OF_FACE, DARK_V, MIN_DIAL_PX, READERS, SCORED, STATUS_READ, UNREADABLE, Dial, dial_of, score_gauge
 
 # --- a dataset ------------------------------------------------------------------------------------
 
@@ -88,11 +87,11 @@ def score_dataset(folder: Path, site, frames: list[dict]) -> list[dict]:
     return rows
 
 
-def run_baseline(folder, out=None, *, sources: Path | None = None) -> Path:
+def run_baseline(folder, out=None, *, sources: Path) -> Path:
     """`twin baseline`: score the dataset at `folder` (OUT/datasets/<name>/) and write
     OUT/reports/baseline_<name>.json, .html and its plots; OUT defaults to the build
     the dataset lies in. Returns the HTML's path."""
-    from .site import load_site
+    from ..runtime.site import load_site
 
     folder = Path(folder).resolve()
     frames = read_frames(folder)

@@ -39,7 +39,7 @@ CACHE_FOLDER = ".cache"  # in the build folder, unless a build is given another 
 USERS_FILE = ".users"  # locked shared by every build using the cache
 USAGE_FILE = ".usage"  # bytes: the last walk's total plus what was stored since (add_usage)
 DEFAULT_LIMIT = 2 << 30  # bytes: room for several cold builds of the sample
-MEMO_FOLDER = "memo"  # where builder.memo keeps its entries
+MEMO_FOLDER = "memo"  # where engine.memo keeps its entries
 
 
 def cache_root(build: Path, cache: Path | None = None) -> Path:

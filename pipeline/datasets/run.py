@@ -29,14 +29,14 @@ from typing import Callable, ContextManager, Iterator
 
 import numpy as np
 
-from ...errors import UserError
-from ...files import atomic_path, atomic_write
-from . import dataset_config, labels
-from .dataset_plan import FramePlan, Planner, frame_id, switch_angles
-from .gauge_reader import dial_of
-from .pinhole import intrinsics
-from .sensor import PhoneCamera
-from .site import Site, load_site
+from ..errors import UserError
+from ..files import atomic_path, atomic_write
+from . import config as dataset_config, labels
+from .plan import FramePlan, Planner, frame_id, switch_angles
+from ..perception.gauge_reader import dial_of
+from ..geometry.pinhole import intrinsics
+from ..render.sensor import PhoneCamera
+from ..runtime.site import Site, load_site
 
 RENDERER = "blender-cycles-cpu"
 FramePool = Callable[[int, int], ContextManager[Executor]]  # (workers, frames a worker renders before it goes)
@@ -48,7 +48,7 @@ FOLDERS = ("images", "masks", "depth", "records")
 
 def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool | None = None,
                 executor: str = "local", workers: int = 1, tasks_per_worker: int | None = None,
-                sources: Path | None = None, progress=None) -> Path:
+                sources: Path, progress=None) -> Path:
     """Render the config's first `frames` frames (all by default) that are not on disk
     yet, then write frames.jsonl and coco.json. Returns the dataset's folder.
     `pool`: where frames render (default local_frames, spawned processes here; see
@@ -60,7 +60,7 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
         # a worker's scene holds what the config's `count` frames see, no more
         raise UserError(cfg.path, "--frames", f"{n}: from 1 to the config's count, {cfg.count}")
     out = Path(out)
-    sources = Path(sources) if sources else Path(__file__).resolve().parents[3] / "sources"
+    sources = Path(sources)
     site = load_site(out, sources)
     folder = out / "datasets" / cfg.name
     _claim(folder, cfg)
@@ -251,7 +251,7 @@ def _context(job: dict) -> dict:
     key = json.dumps(job, sort_keys=True)
     if _WORKER.get("key") == key:
         return _WORKER
-    from .cycles import CyclesScene
+    from ..render.cycles import CyclesScene
 
     if _WORKER.get("scene") is not None:
         _WORKER["scene"].close()
@@ -277,7 +277,7 @@ def _context(job: dict) -> dict:
 
 
 def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
-    from .frames import develop_shot, pointer_binding
+    from ..render.frames import develop_shot, pointer_binding
 
     site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
     scene.scene.cycles.seed = plan.seed
