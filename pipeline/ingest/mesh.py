@@ -428,7 +428,10 @@ def _mesh(path: Path, name: str, geom, matrix: np.ndarray, morph: Morph | None) 
         keys = tuple(ir.ShapeKey(k, apply_transform(p, faces, matrix)[0]) for k, p in morph.keys)
     if not np.isfinite(vertices).all() or any(not np.isfinite(k.vertices).all() for k in keys):
         raise UserError(path, name, "non-finite (NaN or infinite) vertex coordinates")
-    v, f = apply_transform(vertices, faces, matrix)  # mirrored nodes keep outward faces
+    with np.errstate(over="ignore", invalid="ignore"):
+        v, f = apply_transform(vertices, faces, matrix)  # mirrored nodes keep outward faces
+    if not np.isfinite(v).all() or any(not np.isfinite(k.vertices).all() for k in keys):
+        raise UserError(path, name, "coordinates overflow once the units, scale and node transforms apply")
     return ir.Mesh(v, f, uvs=trimesh_uvs(geom), shape_keys=keys)
 
 
