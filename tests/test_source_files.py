@@ -294,3 +294,46 @@ def test_an_image_over_the_byte_cap_is_refused_from_files_and_data(tmp_path, mon
     for asset, who in ((inline, "material 'skin'"), (beside, "material 'grass'"), (collada, "material 'wood'")):
         (message,) = warnings_of(asset).values()
         assert who in message and "over the 1,000 bytes limit for an image" in message, message
+
+
+# --- a .blend's external images ------------------------------------------------------------
+
+BLEND_WITH_EXTERNAL_IMAGE = """
+import sys
+from pathlib import Path
+
+import bpy
+
+target = Path(sys.argv[1])
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.mesh.primitive_cube_add(size=1.0)
+ob = bpy.context.active_object
+image = bpy.data.images.load(str(target.parent / "textures" / "paint.png"))
+image.name = "paint"
+mat = bpy.data.materials.new("painted")
+mat.use_nodes = True
+tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+tex.image = image
+mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+ob.data.materials.append(mat)
+bpy.ops.wm.save_as_mainfile(filepath=str(target), relative_remap=True)
+print(image.filepath)
+"""
+
+
+def test_a_blend_records_the_external_image_it_reads_and_refuses_a_bomb(tmp_path):
+    pytest.importorskip("bpy")
+    from pipeline.ingest.blend import read_blend_path
+
+    (tmp_path / "textures").mkdir()
+    split_png(tmp_path / "textures" / "paint.png")
+    run = subprocess.run([sys.executable, "-c", BLEND_WITH_EXTERNAL_IMAGE, str(tmp_path / "box.blend")],
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0 and "//textures/paint.png" in run.stdout, run.stderr[-2000:]
+    asset = read_blend_path(tmp_path / "box.blend", "box", "test")
+    assert np.array_equal(pixels(asset.material("painted").base_color_texture),
+                          np.asarray(Image.open(tmp_path / "textures" / "paint.png").convert("RGB")))
+    assert opened_of(asset) == {"textures/paint.png": images.digest((tmp_path / "textures" / "paint.png").read_bytes())}
+    (tmp_path / "textures" / "paint.png").write_bytes(png_header_only(30000, 30000))
+    with pytest.raises(UserError, match=r"box.blend: image 'paint': a decompression bomb \(900,000,000 pixels\)"):
+        read_blend_path(tmp_path / "box.blend", "box", "test")
