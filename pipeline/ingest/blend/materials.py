@@ -68,7 +68,9 @@ def _textures(path: Path, name: str, inputs, opened: dict | None = None) -> tupl
             continue
         texture = blend_image(image, path, f"{_safe_stem(name)}_{slot}", opened)
         if texture is None:
-            missing.append(f"{name}.{socket} image {image.name!r} (not packed, not inside the .blend's folder)")
+            where = str(getattr(image, "filepath", "") or "")
+            missing.append(f"{name}.{socket} image {image.name!r}" + (f" at {where!r}" if where else "")
+                           + " (not packed, not found inside the .blend's folder)")
         else:
             found[slot] = texture
     return found, missing
