@@ -375,3 +375,14 @@ def test_editing_a_file_the_reader_opens_rebuilds_the_asset(mini, tmp_path):
 
     elsewhere = explain(sources, tmp_path / "other", *only)  # no state of its own, the same cache
     assert ran(elsewhere) == set()
+
+    (folder / "green.png").unlink()  # gone: the reader says so, and adding it back rebuilds
+    gone = explain(sources, out, *only)
+    assert gone["source:panel"]["changed"] == ["opened green.png"] and _package_images(out) == {}
+    proc = twin("build", "--sources", sources, "--out", out, *only)
+    assert "panel: warning: panel.obj: material 'grass': image 'green.png': not found" in proc.stderr, proc.stderr
+
+    _textured_obj(folder)  # back: read again, and the rest of the chain is the cache's
+    back = explain(sources, out, *only)
+    assert ran(back) == {"source:panel"} and back["source:panel"]["changed"] == ["opened green.png"]
+    assert _package_images(out) == before

@@ -224,7 +224,10 @@ def test_collada_images_out_of_the_folder_are_refused_with_a_warning(tmp_path, i
     (folder / "pole.dae").write_text(textured_collada(init_from))
     asset = read_mesh(cfg(folder / "pole.dae"))
     assert all(m.base_color_texture is None for m in asset.materials)
-    assert opened_of(asset) == {}  # nothing outside was read
+    opened = opened_of(asset)  # nothing read; where a missing image was looked for, inside the folder only
+    assert all(h is None for h in opened.values()) and all(".." not in k and not k.startswith("/") for k in opened)
+    assert sorted(opened) == (["materials/textures/missing.png", "missing.png", "textures/missing.png"]
+                              if init_from == "missing.png" else [])
     (message,) = warnings_of(asset).values()
     assert message.startswith(f"pole.dae: material 'wood': image '{init_from}': {why}"), message
 

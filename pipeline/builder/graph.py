@@ -115,7 +115,7 @@ class Task:
         """The key of what the run just made: the files it reports it opened, with
         the hashes of the bytes it read (an edit during the run is seen next time)."""
         if self.reads_in is not None:
-            self.opened = {str(rel): str(h) for rel, h in sorted(opened.items())}
+            self.opened = {str(rel): None if h is None else str(h) for rel, h in sorted(opened.items())}
             self._key(dep_digests)
         return self.key
 

@@ -81,14 +81,15 @@ class SourceFiles:
 
     served: bytes under a name of the reader's own (a glTF's buffers and embedded
     images, already read and checked), served before any file.
-    opened: path relative to the folder -> sha256 of the bytes read.
+    opened: path relative to the folder -> sha256 of the bytes read (None: looked
+    for there and not found, so that adding it rebuilds the asset too).
     problems: name as asked -> why it was not served (not found, refused, too large)."""
 
     def __init__(self, source: Path, served: dict[str, bytes] | None = None):
         self.source = Path(source)
         self.root = self.source.resolve().parent
         self.served = dict(served or {})
-        self.opened: dict[str, str] = {}
+        self.opened: dict[str, str | None] = {}
         self.problems: dict[str, str] = {}
 
     # --- the resolver interface trimesh calls ----------------------------------------
@@ -123,6 +124,8 @@ class SourceFiles:
         """The file `name` (as written in the source) names inside the folder; Refused
         for an absolute path, a URL or a path out of it, FileNotFoundError when absent."""
         written = unquote(name.strip())
+        if "\0" in written:
+            raise Refused("a path with a NUL character (refused)")
         if not written or _SCHEME.match(written) or written.startswith(("/", "\\")):
             raise Refused("an absolute path or URL (refused: only files in the asset's folder are read)")
         parts = Path(written.replace("\\", "/")).parts
@@ -138,6 +141,10 @@ class SourceFiles:
                 return target
         if not (self.root / candidates[0]).resolve().is_relative_to(self.root):
             raise Refused("leaves the asset's folder (refused)")
+        for rel in candidates:  # where it was looked for: a file that appears there rebuilds the asset
+            target = (self.root / rel).resolve()
+            if target.is_relative_to(self.root):
+                self.opened.setdefault(target.relative_to(self.root).as_posix(), None)
         raise FileNotFoundError(f"not found in the asset's folder {self.root.name}/")
 
     def read(self, name: str, image: bool = False) -> bytes:

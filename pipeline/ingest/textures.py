@@ -89,6 +89,8 @@ def blend_image(image, source: Path, stem: str, opened: dict | None = None) -> i
         try:
             path = files.locate(relative)
         except OSError:
+            if opened is not None:
+                opened.update(files.opened)  # where it was looked for, should it appear there
             return None
         if path.stat().st_size > images.MAX_IMAGE_BYTES:
             raise UserError(source, f"image {image.name!r}", f"{raw}: {size_text(path.stat().st_size)}, over "
