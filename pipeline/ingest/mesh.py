@@ -304,7 +304,6 @@ def _for_trimesh(gltf, files: SourceFiles, facts: Facts) -> None:
     under names of their own (so each image passes its caps there), its external
     images by the names they have."""
     import copy
-    import json
 
     header = copy.deepcopy(gltf.header)
     for i, buffer in enumerate(header.get("buffers", [])):
