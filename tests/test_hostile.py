@@ -222,3 +222,68 @@ def test_external_entity_in_a_package_is_not_resolved(tmp_path):
         assert secret not in p.read_text(), p.name
     assert "PKG005" in (out / "reports" / "validation.json").read_text()
     assert secret not in proc.stdout + proc.stderr
+
+
+# --- what the readers would hand over raw ----------------------------------------------------
+
+def test_a_scale_that_overflows_is_one_error_naming_the_key(case):
+    src, out, before = case
+    toml = src / "assets" / "pole" / "asset.toml"
+    toml.write_text("scale = 1e300\n" + toml.read_text())
+    proc = build(src, out)
+    line = rejected(proc, out, before, "pole/asset.toml: scale")
+    assert "floating point" not in proc.stderr and "RuntimeWarning" not in proc.stderr, proc.stderr
+    assert "maximum" in line
+
+
+BOMB_BLEND = """
+import struct, sys, zlib
+from pathlib import Path
+
+import bpy
+
+
+def chunk(kind, body):
+    return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body))
+
+
+# a PNG whose header says 30000 x 30000 pixels: 69 bytes that would decode to 900 MB
+png = (b"\\x89PNG\\r\\n\\x1a\\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 30000, 30000, 1, 0, 0, 0, 0))
+       + chunk(b"IDAT", zlib.compress(b"\\0" * 64)) + chunk(b"IEND", b""))
+target = Path(sys.argv[-1])
+bomb = target.parent / "bomb.png"
+bomb.write_bytes(png)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+me = bpy.data.meshes.new("box")
+v = [(x, y, z) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0, 1)]
+me.from_pydata(v, [], [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)])
+me.uv_layers.new(name="UVMap")
+ob = bpy.data.objects.new("box", me)
+bpy.context.scene.collection.objects.link(ob)
+image = bpy.data.images.load(str(bomb))
+image.name = "bomb.png"
+image.pack()
+bomb.unlink()
+mat = bpy.data.materials.new("painted")
+mat.use_nodes = True
+tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+tex.image = image
+mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+me.materials.append(mat)
+bpy.ops.wm.save_as_mainfile(filepath=str(target))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_decompression_bomb_packed_in_a_blend_is_one_error_naming_it(case, tmp_path):
+    pytest.importorskip("bpy")
+    src, out, before = case
+    script = tmp_path / "bomb.py"
+    script.write_text(BOMB_BLEND)
+    subprocess.run([sys.executable, str(script), str(tmp_path / "bomb.blend")], check=True, capture_output=True,
+                   timeout=300)
+    _use_blend(src, (tmp_path / "bomb.blend").read_bytes())
+    proc = build(src, out)
+    line = rejected(proc, out, before, "kiosk.blend", "image 'bomb.png'", "decompression bomb")
+    assert "DecompressionBombError" not in proc.stderr and "source:kiosk" not in line, proc.stderr

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import re
@@ -315,3 +316,74 @@ def test_the_import_scan_finds_every_import_a_full_parse_does():
         text = path.read_text()
         full = {ast.dump(n) for n in ast.walk(ast.parse(text)) if isinstance(n, (ast.Import, ast.ImportFrom))}
         assert full <= {ast.dump(n) for n in import_statements(text)}, path
+
+
+# --- the files a reader opens through the source ---------------------------------------------
+
+def _textured_obj(folder: Path, colour=(20, 200, 20)) -> None:
+    """An OBJ asset whose .mtl gives one material a red Kd and another an image."""
+    from PIL import Image
+
+    folder.mkdir(parents=True, exist_ok=True)
+    Image.new("RGB", (4, 2), colour).save(folder / "green.png")
+    (folder / "m.mtl").write_text("newmtl red\nKd 0.9 0.1 0.1\nnewmtl grass\nKd 1 1 1\nmap_Kd green.png\n")
+    (folder / "panel.obj").write_text(
+        "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nvt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\nvt 0 0\n"
+        "usemtl red\nf 1/1 3/3 2/2\nf 1/1 2/2 5/5\nusemtl grass\nf 2/2 3/3 5/5\nf 1/1 5/5 3/3\n")
+    (folder / "asset.toml").write_text('category = "panel"\nsource = "panel.obj"\n')
+
+
+def _package_images(out: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted((out / "models" / "panel" / "textures").glob("*"))}
+
+
+def test_editing_a_file_the_reader_opens_rebuilds_the_asset(mini, tmp_path):
+    """The texture and the .mtl an OBJ names are keyed like the OBJ itself: an edit of
+    either reruns the asset's chain, undoing it restores the cache's, and a build
+    folder that shares the cache but has no state of its own finds them too."""
+    from PIL import Image
+
+    sources = tmp_path / "sources"
+    shutil.copytree(mini[0], sources)
+    folder = sources / "assets" / "panel"
+    _textured_obj(folder)
+    out, cache = tmp_path / "build", tmp_path / "cache"
+    only = ("--only", "panel", "--cache", cache)
+    first = explain(sources, out, *only)
+    assert ran(first) == {"source:panel", "geometry:panel", "asset:panel"}
+    state = json.loads((out / ".state.json").read_text())
+    assert sorted(state["tasks"]["source:panel"]["opened"]) == ["green.png", "m.mtl"]
+    before = _package_images(out)
+    assert ran(explain(sources, out, *only)) == set()
+
+    Image.new("RGB", (4, 2), (200, 20, 20)).save(folder / "green.png")  # the texture repainted
+    edit = explain(sources, out, *only)
+    assert ran(edit) == {"source:panel", "geometry:panel", "asset:panel"}
+    assert edit["source:panel"]["changed"] == ["opened green.png"]
+    after = _package_images(out)
+    assert after != before and len(after) == 1
+    assert np.asarray(Image.open(io.BytesIO(next(iter(after.values()))))).reshape(-1, 3)[0].tolist() == [200, 20, 20]
+
+    mtl = folder / "m.mtl"
+    mtl.write_text(mtl.read_text().replace("Kd 0.9 0.1 0.1", "Kd 0.1 0.1 0.9"))  # red becomes blue
+    recoloured = explain(sources, out, *only)
+    assert recoloured["source:panel"]["changed"] == ["opened m.mtl"] and recoloured["asset:panel"]["ran"]
+
+    _textured_obj(folder)  # everything as it first was: the cache has the chain
+    undone = explain(sources, out, *only)
+    assert ran(undone) == set() and undone["source:panel"]["reason"] == "restored from cache"
+    assert _package_images(out) == before
+
+    elsewhere = explain(sources, tmp_path / "other", *only)  # no state of its own, the same cache
+    assert ran(elsewhere) == set()
+
+    (folder / "green.png").unlink()  # gone: the reader says so, and adding it back rebuilds
+    gone = explain(sources, out, *only)
+    assert gone["source:panel"]["changed"] == ["opened green.png"] and _package_images(out) == {}
+    proc = twin("build", "--sources", sources, "--out", out, *only)
+    assert "panel: warning: panel.obj: material 'grass': image 'green.png': not found" in proc.stderr, proc.stderr
+
+    _textured_obj(folder)  # back: read again, and the rest of the chain is the cache's
+    back = explain(sources, out, *only)
+    assert ran(back) == {"source:panel"} and back["source:panel"]["changed"] == ["opened green.png"]
+    assert _package_images(out) == before

@@ -158,7 +158,10 @@ POLE_SIZE = np.array([2.116, 0.235, 9.223])  # the corpus README's, COLLADA inch
     ('up_axis = "X"\n', POLE_SIZE[[2, 1, 0]]),                # X up: (x, y, z) -> (-z, y, x)
 ])
 def test_collada_unit_and_up_axis(tmp_path, extra, expected):
+    import shutil
+
     cfg = asset_tree(tmp_path, "pole", [POLE], f'category = "pole"\nsource = "telephone_pole.dae"\n{extra}')
+    shutil.copytree(POLE.parents[1] / "materials", cfg.folder / "materials")  # its images, as Gazebo lays them out
     asset = read(cfg)
     np.testing.assert_allclose(extents(asset), expected, rtol=1e-3)
     assert carried(asset) == []  # nothing in the file goes uncarried
@@ -537,7 +540,11 @@ def test_collada_animations_are_said(tmp_path):
     (tmp_path / "pole.dae").write_text(text[:at] + animation + text[at:])
     asset = read_mesh(cfg(tmp_path / "pole.dae"))
     np.testing.assert_allclose(extents(asset), POLE_SIZE, rtol=1e-3)
-    assert carried(asset) == ["1 COLLADA animations are not carried: the model is read as it stands"]
+    said = carried(asset)
+    assert "1 COLLADA animations are not carried: the model is read as it stands" in said
+    # the file came without its materials/ folder: each image it names is said too
+    assert sorted(m for m in said if "COLLADA animations" not in m) == sorted(m for m in said if m.startswith(
+        "pole.dae: material ") and "not found in the asset's folder" in m) and len(said) == 5
 
 
 def test_hostile_mesh_files_are_refused_naming_the_file(tmp_path, capfd):

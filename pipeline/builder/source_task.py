@@ -31,7 +31,7 @@ def build_source(staging: Path, asset_toml: str) -> dict:
     timings = {}
     t = time.perf_counter()
     cfg = _source_config(config.load_asset_config(Path(asset_toml)))
-    source = read_source(cfg)
+    source, opened = _without_opened(read_source(cfg))
     timings["read"] = time.perf_counter() - t
 
     def cleaned():
@@ -48,4 +48,16 @@ def build_source(staging: Path, asset_toml: str) -> dict:
     irfile.write(out, asset, {"source_findings": as_dicts(source_findings),
                               "source_triangles": source.triangle_count(0)})
     warnings = [message for key, message in source.metadata if key.startswith("warning.")]
-    return {"asset": cfg.id, "timings": timings, **({"warnings": warnings} if warnings else {})}
+    return {"asset": cfg.id, "timings": timings, **({"warnings": warnings} if warnings else {}),
+            **({"opened": opened} if opened else {})}
+
+
+def _without_opened(asset):
+    """(the asset without its reader's `opened` record, that record): the files the
+    reader opened through the source (path in the asset's folder -> sha256), which
+    key the task (graph.Task.reads_in) and are no part of what it makes."""
+    import json
+
+    kept = tuple((k, v) for k, v in asset.metadata if k != "opened")
+    opened = next((json.loads(v) for k, v in asset.metadata if k == "opened"), {})
+    return asset.with_(metadata=kept), opened

@@ -11,7 +11,9 @@ edit of the planning here reruns no task. An asset's chain is three tasks:
   .source/<id>/<id>.ir (irfile), with the findings on the file as authored. The
   only task that reads a .blend (so the only one whose worker needs Blender). Its
   parameters are the asset.toml keys the readers use: none of the metadata, LOD or
-  collision keys below.
+  collision keys below. The files the reader opens through the source (textures,
+  a glTF's .bin, an OBJ's .mtl) key it too, as its last run reported them
+  (graph.Task.reads_in: paths in the asset's folder).
 - `geometry:<id>` (builder.geometry_task): the cleaned source -> collision, LOD
   chain -> .ir/<id>/<id>.ir. The slow part (the LOD search). Its parameters are the
   [lod] and [collision] keys.
@@ -196,6 +198,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             code=source_code,
             outputs=(f"{SOURCE_FOLDER}/{asset_id}/",),
             cost=cost,  # its chain's: the longest chains start first
+            reads_in=cfg.folder.resolve(),  # textures, .bin, .mtl the reader opens through the source
         ))
         p.tasks.append(Task(
             name=f"geometry:{asset_id}",

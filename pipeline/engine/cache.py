@@ -86,6 +86,23 @@ class Cache:
             shutil.rmtree(tmp, ignore_errors=True)
         return meta
 
+    def opened_by(self, base_key: str) -> list[str]:
+        """The files a task of this base key (graph.Task.base_key) opened when it last
+        ran into this cache (empty when unknown)."""
+        try:
+            names = json.loads((self.root / base_key[:2] / f"{base_key}.opened.json").read_text())
+        except (OSError, ValueError):
+            return []
+        return [n for n in names if isinstance(n, str)] if isinstance(names, list) else []
+
+    def keep_opened(self, base_key: str, names: list[str]) -> None:
+        """Record the files a run of the task opened (a small file beside the entries,
+        which pruning leaves: a later run rewrites it)."""
+        try:
+            atomic_write(self.root / base_key[:2] / f"{base_key}.opened.json", json.dumps(sorted(names)))
+        except OSError:
+            pass  # a build folder without its own record reruns the task once
+
     def used(self, key: str) -> None:
         """Record that a build used the entry (the last use decides what `prune` keeps)."""
         try:

@@ -74,6 +74,12 @@ class Task:
     previous_ok: dependencies whose failure does not block the task: it runs on
              what such a dependency's last success left in the build folder (if
              all of it is in place) instead.
+    reads_in: the folder of the files an action opens beyond its inputs (a source's
+             textures, .bin, .mtl), which it cannot name before it runs. Its result's
+             "opened" names them (path relative to this folder -> sha256 of the bytes
+             read); the state keeps them beside the outputs, and the next build keys
+             the task on their content then (`opened`), as make does a depfile.
+             Relative names: the key does not depend on where the folder is.
     """
 
     name: str
@@ -89,12 +95,31 @@ class Task:
     warm: tuple[str, ...] = ()  # modules to import ahead in an idle worker; not in the key
     problem: Exception | None = None  # the planner's reason the task cannot run
     previous_ok: tuple[str, ...] = ()  # deps whose last good outputs stand in when they fail
+    reads_in: Path | None = None  # not in the key: the files' names and content are
     key: str = ""
     input_hashes: dict[str, str] = field(default_factory=dict)
+    opened: dict[str, str | None] = field(default_factory=dict)  # in reads_in -> content hash (None: gone)
+    base_key: str = ""
 
-    def compute_key(self, hasher: FileHasher, dep_digests: dict[str, str], root: Path) -> str:
-        """`dep_digests`: output_digest of each dependency, as made or restored."""
+    def compute_key(self, hasher: FileHasher, dep_digests: dict[str, str], root: Path,
+                    opened: dict | None = None) -> str:
+        """`dep_digests`: output_digest of each dependency, as made or restored;
+        `opened`: the files in `reads_in` the last run opened (their names; the state's
+        record of it), hashed now."""
         self.input_hashes = {_rel(p, root): hasher(p) for p in self.inputs}
+        self.opened = {rel: _hash_or_none(hasher, self.reads_in / rel) for rel in sorted(opened or {})} \
+            if self.reads_in is not None else {}
+        return self._key(dep_digests)
+
+    def settle(self, opened: dict[str, str], dep_digests: dict[str, str]) -> str:
+        """The key of what the run just made: the files it reports it opened, with
+        the hashes of the bytes it read (an edit during the run is seen next time)."""
+        if self.reads_in is not None:
+            self.opened = {str(rel): None if h is None else str(h) for rel, h in sorted(opened.items())}
+            self._key(dep_digests)
+        return self.key
+
+    def _key(self, dep_digests: dict[str, str]) -> str:
         material = {
             "name": self.name,
             "inputs": self.input_hashes,
@@ -102,8 +127,18 @@ class Task:
             "params": self.params,
             "code": self.code,
         }
-        self.key = sha256_text(canonical_json(material))
+        # the key without the opened files: a cache keeps under it which files the
+        # task opened, for a build folder that has no record of its own
+        self.base_key = sha256_text(canonical_json(material))
+        self.key = sha256_text(canonical_json({**material, "opened": self.opened})) if self.opened else self.base_key
         return self.key
+
+
+def _hash_or_none(hasher: FileHasher, path: Path) -> str | None:
+    try:
+        return hasher(path)
+    except OSError:  # gone since the last run (the reader says what it misses)
+        return None
 
 
 def _rel(path: Path, root: Path) -> str:
@@ -162,6 +197,10 @@ def explain(task: Task, previous: dict | None, cached: bool, dep_digests: dict[s
     for path in sorted(set(old_inputs) | set(task.input_hashes)):
         if old_inputs.get(path) != task.input_hashes.get(path):
             changed.append(f"input {path}")
+    old_opened = previous.get("opened", {})
+    for path in sorted(set(old_opened) | set(task.opened)):
+        if old_opened.get(path) != task.opened.get(path):
+            changed.append(f"opened {path}")
     for dep in sorted(set(previous.get("deps", {})) | set(task.deps)):
         if previous.get("deps", {}).get(dep) != dep_digests.get(dep):
             changed.append(f"dependency {dep}")
@@ -187,4 +226,5 @@ def record(task: Task, dep_digests: dict[str, str], files: dict[str, str]) -> di
         "params": task.params,
         "code": task.code,
         "outputs": list(task.outputs),
+        **({"opened": task.opened} if task.opened else {}),
     }

@@ -148,8 +148,8 @@ class Scheduler:
                 stale.append(t)
                 names.add(t.name)
                 continue
-            key = t.compute_key(hasher, digests, self.build)
             previous = state["tasks"].get(t.name)
+            key = self._key(t, hasher, digests, previous)
             if self._fresh(previous, key):
                 digests[t.name] = previous["digest"]
             elif self.cache.has(key):
@@ -159,6 +159,15 @@ class Scheduler:
                 names.add(t.name)
         width = sum(1 for t in stale if not names.intersection(t.deps))
         return max(1, self.cores // max(1, min(self.jobs, width)))
+
+    def _key(self, task: Task, hasher: FileHasher, digests: dict[str, str], previous: dict | None) -> str:
+        """The task's key, with the files its last run opened (Task.reads_in): as this
+        build folder's state recorded them, else as the cache's last run of it did."""
+        if task.reads_in is None or previous is not None:
+            return task.compute_key(hasher, digests, self.build, _opened(previous))
+        base = task.compute_key(hasher, digests, self.build)
+        names = self.cache.opened_by(base)
+        return task.compute_key(hasher, digests, self.build, dict.fromkeys(names)) if names else base
 
     def _cpus(self) -> tuple[int, ...]:
         """The CPUs the workers are held to: the first `cores` this process may use
@@ -208,8 +217,8 @@ class Scheduler:
                             self._block(report, broken, task, missing)
                             done.add(name)
                             continue
-                        task.compute_key(hasher, digests, self.build)
                         previous = state["tasks"].get(name)
+                        self._key(task, hasher, digests, previous)
                         if self._fresh(previous, task.key):
                             self.cache.used(task.key)
                             why = explain(task, previous, False, digests)
@@ -293,6 +302,9 @@ class Scheduler:
                             continue
                         suspects.discard(task.name)
                         report.timings[task.name] = out["seconds"]
+                        task.settle(out["result"].get("opened", {}), digests)  # what it read enters its key
+                        if task.opened:
+                            self.cache.keep_opened(task.base_key, sorted(task.opened))
                         self.cache.put(task.key, staging, out["result"])
                         meta = self._place(task, task.key)
                         self._finish(state, task, digests, meta, report)
@@ -442,6 +454,11 @@ def _as_failure(problem: Exception) -> dict:
     if isinstance(problem, UserError):
         return {"user_error": str(problem), "file": problem.file, "object": problem.obj, "message": problem.message}
     return {"error": f"{type(problem).__name__}: {problem}"}
+
+
+def _opened(previous: dict | None) -> dict:
+    """The files the task's last run opened beyond its inputs (Task.reads_in)."""
+    return (previous or {}).get("opened") or {}
 
 
 def _stood_on(why: dict, failed: list[str]) -> dict:

@@ -59,8 +59,10 @@ def _data_uri(uri: str) -> bytes:
     return base64.b64decode(payload, validate=False)
 
 
-def read(path: Path) -> Gltf:
-    """The glTF (.gltf or .glb) at `path` with its buffers loaded."""
+def read(path: Path, open_file=None) -> Gltf:
+    """The glTF (.gltf or .glb) at `path` with its buffers loaded. `open_file(uri)`:
+    how a buffer file beside it is read (ingest.images.SourceFiles.read: capped and
+    recorded), else directly."""
     path = Path(path)
     data = path.read_bytes()
     if data[:4] == glb.MAGIC:
@@ -90,5 +92,8 @@ def read(path: Path) -> Gltf:
                 raise GltfError(f"buffer {i} uri {uri!r} leaves the file's folder (refused)")
             if not target.is_file():
                 raise GltfError(f"buffer {i} file {uri!r} not found beside the file")
-            buffers.append(target.read_bytes())
+            try:
+                buffers.append(open_file(uri) if open_file is not None else target.read_bytes())
+            except OSError as e:
+                raise GltfError(f"buffer {i} file {uri!r}: {e}") from None
     return Gltf(header, tuple(buffers))

@@ -16,23 +16,29 @@ each key the shape with that target alone at full weight.
 
 Files are untrusted: a COLLADA file that declares a DOCTYPE is refused (no entity is
 ever resolved), and a glTF buffer or image, an OBJ material library, or an image an
-.mtl names must be a file inside the source's folder.
+.mtl names must be a file inside the source's folder (an error otherwise). Every other
+file trimesh asks for goes through ingest.images.SourceFiles: read from the asset's
+folder only, images capped, each file read recorded (Asset.metadata `opened`). A
+glTF's buffers and embedded images reach trimesh under names of that resolver's own,
+so that every image, embedded or not, passes the same caps. An image not carried (not
+found, refused, over a cap) is a warning naming its material and its path.
 """
 
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from urllib.parse import unquote
 
 import numpy as np
 
 from .. import ir
 from ..errors import UserError
 from ..geometry.clean import apply_transform
+from .images import SourceFiles, is_image_name
 from .textures import trimesh_textures, trimesh_uvs, with_textures
 from .units import Frame, resolve
 
@@ -61,8 +67,9 @@ def _safe_name(name: str, fallback: str) -> str:
     return name or fallback
 
 
-def _material(geom, fallback: str) -> ir.Material:
-    """The trimesh visual's PBR or simple material, as an ir.Material."""
+def _material(geom, fallback: str, unset: tuple = (0.8, 0.8, 0.8, 1.0)) -> ir.Material:
+    """The trimesh visual's PBR or simple material, as an ir.Material; `unset`: the
+    base colour of one that states none (glTF's is white by its specification)."""
     mat = getattr(getattr(geom, "visual", None), "material", None)
     if mat is None:
         return DEFAULT_MATERIAL
@@ -70,7 +77,7 @@ def _material(geom, fallback: str) -> ir.Material:
     try:
         pbr = mat.to_pbr() if hasattr(mat, "to_pbr") else mat
         color = pbr.baseColorFactor
-        rgba = tuple(float(c) for c in (np.asarray(color, dtype=np.float64) / (255.0 if np.asarray(color).dtype.kind in "ui" else 1.0))) if color is not None else (0.8, 0.8, 0.8, 1.0)
+        rgba = tuple(float(c) for c in (np.asarray(color, dtype=np.float64) / (255.0 if np.asarray(color).dtype.kind in "ui" else 1.0))) if color is not None else unset
         emissive = pbr.emissiveFactor
         return ir.Material(
             name,
@@ -107,10 +114,14 @@ class Facts:
     warnings: dict[str, str] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     morphs: dict[str, Morph] = field(default_factory=dict)  # trimesh geometry name -> targets
+    # a name trimesh asks the resolver for -> (how the file calls it, the materials using it)
+    names: dict[str, tuple[str, tuple[str, ...]]] = field(default_factory=dict)
+    trimesh_file: bytes | None = None  # what trimesh reads instead of the file (a glTF's JSON)
 
 
-def collada_facts(path: Path) -> Facts:
-    """<unit meter>, <up_axis>, and the animations and controllers trimesh leaves out."""
+def collada_facts(path: Path, files: SourceFiles | None = None) -> Facts:
+    """<unit meter>, <up_axis>, the animations and controllers trimesh leaves out, and
+    the materials each image serves."""
     from .. import safe_xml  # lxml is loaded by the first COLLADA file
 
     # Refused before the parse and, for a DOCTYPE past the first 64 KiB, after it:
@@ -142,14 +153,34 @@ def collada_facts(path: Path) -> Facts:
         kinds = ", ".join(f"{n} {k}" for n, k in ((len(skins), "skin"), (len(morphs), "morph")) if n)
         facts.warnings["controller"] = (f"COLLADA controllers ({kinds}) are not carried: the meshes they deform "
                                         "are left out (export them as plain geometry)")
+    facts.names = _collada_images(root)
     return facts
 
 
-def _gltf_header(path: Path):
+def _collada_images(root) -> dict[str, tuple[str, tuple[str, ...]]]:
+    """init_from of each <image> -> (itself, the materials whose effect names the image
+    (by its id, or through a <surface> param))."""
+    images = {im.get("id"): (im.findtext("{*}init_from") or im.findtext("{*}init_from/{*}ref") or "").strip()
+              for im in root.iter("{*}image")}
+    effects: dict[str, set[str]] = {}
+    for effect in root.iter("{*}effect"):
+        named = {el.text.strip() for el in effect.iter("{*}init_from") if el.text}
+        named |= {el.get("texture") for el in effect.iter("{*}texture")}
+        effects[effect.get("id")] = {i for i in named if i in images}
+    users: dict[str, set[str]] = {}
+    for mat in root.iter("{*}material"):
+        inst = mat.find("{*}instance_effect")
+        url = (inst.get("url") or "").lstrip("#") if inst is not None else ""
+        for image_id in effects.get(url, ()):
+            users.setdefault(images[image_id], set()).add(mat.get("name") or mat.get("id") or "?")
+    return {path: (path, tuple(sorted(users.get(path, ())))) for path in images.values() if path}
+
+
+def _gltf_header(path: Path, files: SourceFiles | None = None):
     from .gltf_file import GltfError, read
 
     try:
-        return read(path)
+        return read(path, files.read if files is not None else None)
     except GltfError as e:
         raise UserError(path, None, str(e)) from None
     except MemoryError:
@@ -242,13 +273,77 @@ def _decodable(path: Path, header: dict) -> None:
                                     "lacks: export the file without mesh compression")
 
 
-def gltf_facts(path: Path) -> Facts:
+def _image_users(header: dict) -> dict[int, list[str]]:
+    """image index -> the names of the materials sampling it."""
+    users: dict[int, list[str]] = {}
+    textures = header.get("textures", [])
+
+    def walk(node, material: str) -> None:
+        if isinstance(node, dict):
+            for key, value in node.items():
+                if key.endswith("Texture") and isinstance(value, dict) and isinstance(value.get("index"), int) \
+                        and 0 <= value["index"] < len(textures) and isinstance(textures[value["index"]], dict):
+                    texture = textures[value["index"]]
+                    sources = [texture.get("source")] + [e.get("source") for e in texture.get("extensions", {}).values()
+                                                         if isinstance(e, dict)]
+                    for source in sources:
+                        if isinstance(source, int) and material not in users.setdefault(source, []):
+                            users[source].append(material)
+                walk(value, material)
+        elif isinstance(node, list):
+            for value in node:
+                walk(value, material)
+
+    for i, mat in enumerate(header.get("materials", [])):
+        walk(mat, str(mat.get("name") or f"materials[{i}]") if isinstance(mat, dict) else f"materials[{i}]")
+    return users
+
+
+def _for_trimesh(gltf, files: SourceFiles, facts: Facts) -> None:
+    """The glTF as trimesh reads it: its buffers and embedded images served by `files`
+    under names of their own (so each image passes its caps there), its external
+    images by the names they have."""
+    import copy
+
+    header = copy.deepcopy(gltf.header)
+    for i, buffer in enumerate(header.get("buffers", [])):
+        files.served[f"buffer-{i}.bin"] = gltf.buffers[i]
+        buffer["uri"] = f"buffer-{i}.bin"
+    users = _image_users(header)
+    for i, image in enumerate(header.get("images", [])):
+        if not isinstance(image, dict):
+            continue
+        label = image.get("name") or f"images[{i}]"
+        uri = image.get("uri")
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            facts.names[uri] = (f"{label} ({uri})" if image.get("name") else uri, tuple(users.get(i, ())))
+            continue
+        name = f"image-{i}.img"
+        try:
+            if "bufferView" in image:
+                view = header["bufferViews"][image.pop("bufferView")]
+                start = int(view.get("byteOffset", 0))
+                files.served[name] = gltf.buffers[view["buffer"]][start: start + int(view["byteLength"])]
+            elif isinstance(uri, str):
+                from .gltf_file import _data_uri
+
+                files.served[name] = _data_uri(uri)
+        except (KeyError, IndexError, TypeError, ValueError):
+            continue  # trimesh finds nothing under the name: said below as not found
+        image["uri"] = name
+        facts.names[name] = (f"{label} ({'data: URI' if uri else 'in the binary buffer'})", tuple(users.get(i, ())))
+    facts.trimesh_file = json.dumps(header).encode()
+
+
+def gltf_facts(path: Path, files: SourceFiles | None = None) -> Facts:
     """Metres, Y up; the morph targets; the animations and skins trimesh leaves out."""
-    gltf = _gltf_header(path)
+    gltf = _gltf_header(path, files)
     header = gltf.header
     _decodable(path, header)
     _check_images(path, header)
     facts = Facts(metres=None, up=None, default_up="Y")
+    if files is not None:
+        _for_trimesh(gltf, files, facts)
     _morphs(path, gltf, facts)
     animations = header.get("animations", [])
     if animations:
@@ -261,11 +356,13 @@ def gltf_facts(path: Path) -> Facts:
     return facts
 
 
-def obj_facts(path: Path) -> Facts:
-    """Refuses material libraries (and the images they name) outside the folder."""
+def obj_facts(path: Path, files: SourceFiles | None = None) -> Facts:
+    """Refuses material libraries (and the images they name) outside the folder; the
+    materials each image serves."""
     from .gltf_file import inside
 
     folder = path.parent
+    facts = Facts()
     with open(path, "rb") as fh:
         for line in fh:
             if line.startswith(b"mtllib"):
@@ -273,20 +370,28 @@ def obj_facts(path: Path) -> Facts:
                     lib = inside(folder, name)
                     if lib is None:
                         raise UserError(path, "mtllib", f"{name!r} leaves the file's folder (refused)")
+                    facts.names[name] = (f"material library {name}", ())
                     if lib.is_file():
-                        _check_mtl(lib, folder)
-    return Facts()
+                        _check_mtl(lib, folder, facts)
+    return facts
 
 
-def _check_mtl(mtl: Path, folder: Path) -> None:
+def _check_mtl(mtl: Path, folder: Path, facts: Facts) -> None:
     from .gltf_file import inside
 
+    material = "?"
     for line in mtl.read_bytes().decode("utf-8", "replace").splitlines():
         words = line.split()
+        if words and words[0].lower() == "newmtl":
+            material = " ".join(words[1:])
         if words and (words[0].lower().startswith("map_") or words[0].lower() in ("bump", "disp", "decal", "refl")):
             name = words[-1]
             if inside(folder, name) is None:
                 raise UserError(mtl, words[0], f"{name!r} leaves the file's folder (refused)")
+            # trimesh asks for the rest of the line after map_Kd
+            asked = line[line.lower().index(words[0].lower()) + len(words[0]):].strip()
+            label, users = facts.names.get(asked, (asked, ()))
+            facts.names[asked] = (label, tuple(sorted({*users, material})))
 
 
 FACTS = {".dae": collada_facts, ".gltf": gltf_facts, ".glb": gltf_facts, ".obj": obj_facts}
@@ -322,7 +427,10 @@ def _mesh(path: Path, name: str, geom, matrix: np.ndarray, morph: Morph | None) 
         keys = tuple(ir.ShapeKey(k, apply_transform(p, faces, matrix)[0]) for k, p in morph.keys)
     if not np.isfinite(vertices).all() or any(not np.isfinite(k.vertices).all() for k in keys):
         raise UserError(path, name, "non-finite (NaN or infinite) vertex coordinates")
-    v, f = apply_transform(vertices, faces, matrix)  # mirrored nodes keep outward faces
+    with np.errstate(over="ignore", invalid="ignore"):
+        v, f = apply_transform(vertices, faces, matrix)  # mirrored nodes keep outward faces
+    if not np.isfinite(v).all() or any(not np.isfinite(k.vertices).all() for k in keys):
+        raise UserError(path, name, "coordinates overflow once the units, scale and node transforms apply")
     return ir.Mesh(v, f, uvs=trimesh_uvs(geom), shape_keys=keys)
 
 
@@ -345,7 +453,8 @@ def asset_from_trimesh(loaded, cfg, path: Path, frame: Frame, metadata: tuple[tu
         mesh = _mesh(path, vis_name, geom, frame.matrix() @ transform, morph)
         if mesh.shape_keys:
             carried.add(geom_name)
-        mat = _material(geom, f"{vis_name}_material")
+        mat = _material(geom, f"{vis_name}_material", (1.0,) * 4 if path.suffix.lower() in (".gltf", ".glb")
+                        else (0.8, 0.8, 0.8, 1.0))
         if mat.name not in materials:
             textures = trimesh_textures(getattr(getattr(geom, "visual", None), "material", None),
                                         _TEXTURE_SLOTS.get(path.suffix.lower(), ir.TEXTURE_SLOTS))
@@ -387,13 +496,20 @@ def _quiet_trimesh():
         logger.setLevel(before)
 
 
-def _load(path: Path, file_type: str | None = None):
+def _load(path: Path, file_type: str | None = None, files: SourceFiles | None = None, text: bytes | None = None):
+    """trimesh's reading of `path` (or of `text` in its stead), every other file through
+    `files` (default: the file's folder)."""
+    import io
+
     import trimesh
 
+    files = files if files is not None else SourceFiles(path)
     try:
         with _quiet_trimesh():
             # process=False: no silent merging; cleaning is the geometry step's job
-            return trimesh.load(str(path), file_type=file_type, process=False, resolver=_ImageResolver(path))
+            if text is not None:
+                return trimesh.load(io.BytesIO(text), file_type=file_type, process=False, resolver=files)
+            return trimesh.load(str(path), file_type=file_type, process=False, resolver=files)
     except (UserError, MemoryError):
         raise
     except Exception as e:  # trimesh raises many types for corrupt files
@@ -406,32 +522,6 @@ def _load(path: Path, file_type: str | None = None):
 _TEXTURE_SLOTS = {".dae": ("base_color", "emissive")}
 
 
-class _ImageResolver:
-    """Where a mesh file's images are looked up (by trimesh): beside the file, in
-    textures/ or materials/textures/ beside it (a Gazebo model folder's layout, with
-    the mesh moved up from meshes/), then in ../materials/textures/ (the mesh left in
-    meshes/); names inside those folders only (the file is untrusted: no other path
-    is read)."""
-
-    def __init__(self, path: Path):
-        folder = Path(path).resolve().parent
-        self.folders = (folder, folder / "textures", folder / "materials" / "textures",
-                        folder.parent / "materials" / "textures")
-
-    def get(self, name: str) -> bytes:
-        for folder in self.folders:
-            candidate = (folder / unquote(str(name))).resolve()
-            if candidate.is_relative_to(folder) and candidate.is_file():
-                return candidate.read_bytes()
-        raise FileNotFoundError(name)
-
-    def namespaced(self, namespace: str) -> "_ImageResolver":
-        return self
-
-    def write(self, name: str, data) -> None:
-        raise PermissionError("reading a source writes nothing")
-
-
 def read_mesh(cfg) -> ir.Asset:
     """Read cfg.source (.stl/.obj/.ply/.glb/.gltf/.dae) into an ir.Asset in metres, Z up."""
     path = Path(cfg.source)
@@ -439,7 +529,23 @@ def read_mesh(cfg) -> ir.Asset:
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
         raise UserError(path, None, f"unsupported mesh format {suffix!r}")
-    facts = FACTS.get(suffix, lambda p: Facts())(path)
-    loaded = _load(path, suffix[1:])
+    files = SourceFiles(path)
+    facts = FACTS.get(suffix, lambda p, f: Facts())(path, files)
+    loaded = _load(path, "gltf" if facts.trimesh_file is not None else suffix[1:], files, facts.trimesh_file)
+    _not_read(path, files, facts)
     frame = resolve(cfg, facts.metres, facts.up, facts.default_up)
-    return asset_from_trimesh(loaded, cfg, path, frame, frame.metadata(), facts)
+    opened = (("opened", json.dumps(files.opened, sort_keys=True)),) if files.opened else ()
+    return asset_from_trimesh(loaded, cfg, path, frame, (*frame.metadata(), *opened), facts)
+
+
+def _not_read(path: Path, files: SourceFiles, facts: Facts) -> None:
+    """A warning for each file the source names that was not read (not found, refused,
+    over a cap), naming the materials that use it and its path as written."""
+    for name, why in sorted(files.problems.items()):
+        label, users = facts.names.get(name, (name, ()))
+        who = f"material {', '.join(map(repr, users))}: " if users else ""
+        if label.startswith("material library"):
+            facts.warnings[f"not_read.{label}"] = f"{path.name}: {label}: {why}; its materials are not carried"
+            continue
+        what = "image" if is_image_name(name) else "file"
+        facts.warnings[f"not_read.{label}"] = f"{path.name}: {who}{what} {label!r}: {why}; not carried"

@@ -67,20 +67,41 @@ def with_textures(material: ir.Material, textures: dict[str, ir.Texture]) -> ir.
         **{f"{slot}_texture": t for slot, t in textures.items()})
 
 
-def blend_image(image, source: Path, stem: str) -> ir.Texture | None:
+def blend_image(image, source: Path, stem: str, opened: dict | None = None) -> ir.Texture | None:
     """A bpy image as a texture: packed bytes as stored, else the file it names when
-    that file lies inside the .blend's folder; None when neither (the caller warns)."""
+    that file lies inside the .blend's folder (recorded in `opened`, relative path ->
+    sha256); None when neither (the caller warns). An image over the caps
+    (ingest.images) is a UserError naming the .blend and the image."""
+    from ..errors import UserError
+    from . import images
+    from .images import SourceFiles, image_problem, size_text
+
     packed = getattr(image, "packed_file", None)
     if packed is not None and packed.data:
+        if int(getattr(packed, "size", 0) or 0) > images.MAX_IMAGE_BYTES:
+            raise UserError(source, f"image {image.name!r}", f"packed image of {size_text(packed.size)}, over "
+                                                             f"the {size_text(images.MAX_IMAGE_BYTES)} limit for an image")
         data = bytes(packed.data)
     else:
         raw = str(getattr(image, "filepath", "") or "")
         relative = raw[2:] if raw.startswith("//") else raw
-        folder = Path(source).resolve().parent
-        path = (folder / relative).resolve()
-        if not relative or not path.is_relative_to(folder) or not path.is_file():
+        files = SourceFiles(source)
+        try:
+            path = files.locate(relative)
+        except OSError:
+            if opened is not None:
+                opened.update(files.opened)  # where it was looked for, should it appear there
             return None
+        if path.stat().st_size > images.MAX_IMAGE_BYTES:
+            raise UserError(source, f"image {image.name!r}", f"{raw}: {size_text(path.stat().st_size)}, over "
+                                                             f"the {size_text(images.MAX_IMAGE_BYTES)} limit for an image")
         data = path.read_bytes()
+        files.record(path, data)
+        if opened is not None:
+            opened.update(files.opened)
+    why = image_problem(data)
+    if why is not None:
+        raise UserError(source, f"image {image.name!r}", why)
     texture = ir.Texture(stem, data)
     try:
         texture.mime  # PNG or JPEG as found

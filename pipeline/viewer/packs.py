@@ -10,11 +10,14 @@ so a tileset stores each mesh once however many tiles place it.
 Layout: `Pack.binary` holds, per merged primitive, its indices then its attributes,
 each at a 4-byte boundary; `views` and `accessors` index into it (the tile gives the
 views their buffer), `primitives` reference those accessors and the pack's own
-`materials`, textures, images and samplers (images are stored in the binary too).
+`materials`, textures, images and samplers. An image is a file of its own named by
+its content (`image_file`), which every level and every model that samples it
+references: the tiles store each image once.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 
@@ -24,6 +27,13 @@ from .. import glb
 
 _KEPT = ("POSITION", "NORMAL", "TEXCOORD_0", "TEXCOORD_1")  # attributes a tile keeps
 _TRIANGLES = 4
+IMAGES = "images"  # the folder of the image files, beside the packs' meshes/
+_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}
+
+
+def image_file(data: bytes, mime: str) -> str:
+    """Where an image is kept, relative to tiles/: named by its content."""
+    return f"{IMAGES}/{hashlib.sha256(data).hexdigest()[:24]}{_SUFFIX.get(mime, '.bin')}"
 
 
 @dataclass
@@ -48,6 +58,7 @@ class Pack:
     hull: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     triangles: int = 0
     stored_length: int = 0  # the binary's length where it is kept elsewhere (binary None)
+    image_data: dict[str, bytes] = field(default_factory=dict)  # image_file -> bytes; empty when recalled
 
     @property
     def byte_length(self) -> int:
@@ -55,6 +66,11 @@ class Pack:
 
     _META = ("asset", "level", "views", "accessors", "primitives", "materials", "textures", "images", "samplers",
              "variants", "triangles")
+
+    @property
+    def image_files(self) -> list[str]:
+        """The image files (relative to tiles/) the pack's images name."""
+        return sorted({im["uri"] for im in self.images if "uri" in im and not im["uri"].startswith("data:")})
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The pack but its binary, as plain arrays (a builder ArrayMemo entry)."""
@@ -150,9 +166,12 @@ def _copy_materials(pack: Pack, writer: glb.Buffer, doc: dict, binary: bytes, us
                 if "source" in tex:
                     image = dict(doc["images"][tex["source"]])
                     if "bufferView" in image:
-                        view = doc["bufferViews"][image["bufferView"]]
+                        view = doc["bufferViews"][image.pop("bufferView")]
                         start = view.get("byteOffset", 0)
-                        image["bufferView"] = writer.add_view(binary[start: start + view["byteLength"]])
+                        data = binary[start: start + view["byteLength"]]
+                        name = image_file(data, image.get("mimeType", ""))
+                        pack.image_data[name] = data
+                        image["uri"] = name  # relative to tiles/: a tile prefixes its own way there
                     pack.images.append(image)
                     tex["source"] = len(pack.images) - 1
                 pack.textures.append(tex)

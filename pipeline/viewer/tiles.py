@@ -18,7 +18,8 @@ tolerance ([lod] in site.toml), so only the tiles near the eye load finer levels
 Contents: each placed model at a tile's level is one pack (viewer.packs), drawn
 with one EXT_mesh_gpu_instancing node per model per tile; the packs' vertex data are
 shared files (tiles/meshes/) that the tiles reference, so the geometry is stored
-once per model and level. Bounding volumes are boxes in the ENU frame around what
+once per model and level, and each image once (tiles/images/, named by content) for
+every level and model that samples it. Bounding volumes are boxes in the ENU frame around what
 the tile draws: every placement's pack hull transformed by its pose, and the
 children's boxes.
 """
@@ -37,7 +38,7 @@ from .. import glb
 from ..export.names import gltf_file
 from ..files import atomic_write
 from ..scene.placements import yaw_matrix
-from .packs import Pack, make_pack, texture_refs
+from .packs import IMAGES, Pack, make_pack, texture_refs
 
 TILESET = "tileset.json"
 MIN_CELL_M = 8.0  # no cell smaller: below it, a tile holds about one placement
@@ -185,7 +186,8 @@ def _add_pack(doc: dict, pack: Pack, variants: list[str], used: set[str]) -> int
     materials, textures = len(doc["materials"]), len(doc["textures"])
     images, samplers = len(doc["images"]), len(doc["samplers"])
     doc["samplers"] += pack.samplers
-    doc["images"] += [{**im, "bufferView": im["bufferView"] + views} if "bufferView" in im else im for im in pack.images]
+    doc["images"] += [{**im, "uri": "../" + quote(im["uri"])} if "uri" in im and not im["uri"].startswith("data:")
+                      else im for im in pack.images]  # the shared image files, from content/
     doc["textures"] += [{**t, **({"sampler": t["sampler"] + samplers} if "sampler" in t else {}),
                          **({"source": t["source"] + images} if "source" in t else {})} for t in pack.textures]
     for mat in pack.materials:
@@ -253,17 +255,29 @@ def packs_of(out: Path, models: Path, manifests: dict[str, dict], memo=None) -> 
             key = f"{a}\0{digest}\0{level}"
             if memo is not None and digest:
                 kept = memo[1].get(key)
-                if kept is not None and memo[0].link(key, dest):
-                    packs[(a, level)] = Pack.from_arrays(kept)
-                    continue
+                if kept is not None:
+                    recalled = Pack.from_arrays(kept)
+                    if all(_linked(out, name, memo) for name in recalled.image_files) and memo[0].link(key, dest):
+                        packs[(a, level)] = recalled
+                        continue
             if doc is None:
                 doc, binary = glb.read(models / a / model_file)
             pack = packs[(a, level)] = make_pack(a, level, doc, binary)
             dest.write_bytes(pack.binary)
+            for name, data in pack.image_data.items():
+                if not (out / name).is_file():
+                    (out / name).write_bytes(data)
+                    if memo is not None:
+                        memo[0].keep(f"image\0{name}", out / name)
             if memo is not None and digest:
                 memo[0].keep(key, dest)
                 memo[1].put(key, pack.arrays())
     return packs
+
+
+def _linked(out: Path, name: str, memo) -> bool:
+    """Whether the image file `name` is in place in `out`, linked from the memo if need be."""
+    return (out / name).is_file() or memo[0].link(f"image\0{name}", out / name)
 
 
 def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], lod: dict, memo=None) -> dict:
@@ -274,6 +288,7 @@ def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], 
     out = Path(out)
     (out / "content").mkdir(parents=True, exist_ok=True)
     (out / "meshes").mkdir(exist_ok=True)
+    (out / IMAGES).mkdir(exist_ok=True)
     placements = record["placements"]
     assets = [p["asset"] for p in placements]
     errors = {a: levels_of(manifests[a]) for a in sorted(set(assets))}
@@ -330,6 +345,7 @@ def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], 
                           "frame": "root transform: scene ENU (x east, y north, z up, metres) -> ECEF (EPSG:4978)"}}
     (out / TILESET).write_text(json.dumps(tileset, indent=1, sort_keys=True) + "\n")
     figures["mesh_bytes"] = sum(p.byte_length for p in packs.values())
+    figures["image_bytes"] = sum(p.stat().st_size for p in (out / IMAGES).iterdir())
     figures["packs"] = len(packs)
     return figures
 

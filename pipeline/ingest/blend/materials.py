@@ -15,12 +15,13 @@ from .scene import Scene
 DEFAULT_MATERIAL = "default"
 
 
-def material(bpy, path: Path, name: str, warnings: dict | None = None) -> ir.Material:
+def material(bpy, path: Path, name: str, warnings: dict | None = None, opened: dict | None = None) -> ir.Material:
     """Principled BSDF inputs of material `name`: their unlinked values, and the image
     of an Image Texture node linked to Base Color, Normal (through a Normal Map node) or
     Emission Color, whose factor is then white as in Blender; a material without one
     falls back to its viewport colour, metallic and roughness. An image that cannot be
-    had (external, outside the .blend's folder or missing) is a warning."""
+    had (external, outside the .blend's folder or missing) is a warning; an external
+    image read is recorded in `opened` (path relative to the folder -> sha256)."""
     if name == DEFAULT_MATERIAL and name not in bpy.data.materials:
         return ir.Material(DEFAULT_MATERIAL)
     mat = bpy.data.materials.get(name)
@@ -38,7 +39,7 @@ def material(bpy, path: Path, name: str, warnings: dict | None = None) -> ir.Mat
     values = (r, g, b, alpha, float(inputs["Metallic"].default_value), float(inputs["Roughness"].default_value), *emission)
     if not all(math.isfinite(v) for v in values):
         raise UserError(path, name, "material has NaN or infinite values")
-    textures, missing = _textures(path, name, inputs)
+    textures, missing = _textures(path, name, inputs, opened)
     if missing and warnings is not None:
         warnings["textures"] = ", ".join(filter(None, [warnings.get("textures"), *missing]))
     if "base_color" in textures:
@@ -58,16 +59,18 @@ def material(bpy, path: Path, name: str, warnings: dict | None = None) -> ir.Mat
 _TEXTURE_SOCKETS = {"base_color": "Base Color", "normal": "Normal", "emissive": "Emission Color"}
 
 
-def _textures(path: Path, name: str, inputs) -> tuple[dict[str, ir.Texture], list[str]]:
+def _textures(path: Path, name: str, inputs, opened: dict | None = None) -> tuple[dict[str, ir.Texture], list[str]]:
     """slot -> texture of the Principled inputs' linked images, and what could not be read."""
     found, missing = {}, []
     for slot, socket in _TEXTURE_SOCKETS.items():
         image = _linked_image(inputs[socket]) if socket in inputs else None
         if image is None:
             continue
-        texture = blend_image(image, path, f"{_safe_stem(name)}_{slot}")
+        texture = blend_image(image, path, f"{_safe_stem(name)}_{slot}", opened)
         if texture is None:
-            missing.append(f"{name}.{socket} image {image.name!r} (not packed, not inside the .blend's folder)")
+            where = str(getattr(image, "filepath", "") or "")
+            missing.append(f"{name}.{socket} image {image.name!r}" + (f" at {where!r}" if where else "")
+                           + " (not packed, not found inside the .blend's folder)")
         else:
             found[slot] = texture
     return found, missing

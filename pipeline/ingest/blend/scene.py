@@ -34,6 +34,7 @@ class Scene:
     visuals_of: dict[str, tuple[str, ...]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     warnings: dict[str, str] = field(default_factory=dict)  # what is not carried -> the message
+    opened: dict[str, str] = field(default_factory=dict)  # external images read: path in the folder -> sha256
     # objects and visuals whose shape-key weights asset.toml's bindings drive (driven_objects)
     driven: frozenset[str] = frozenset()
 
@@ -55,4 +56,8 @@ def scene_metadata(scene: Scene) -> tuple[tuple[str, str], ...]:
     if scene.notes:
         meta.append(("notes", "; ".join(sorted(scene.notes))))
     meta.extend((f"warning.{k}", scene.warnings[k]) for k in sorted(scene.warnings))
+    if scene.opened:
+        import json
+
+        meta.append(("opened", json.dumps(scene.opened, sort_keys=True)))
     return tuple(meta)

@@ -54,7 +54,7 @@ def read_scene(path: Path, scene: Scene) -> None:
     scene.links = assemble_links(path, scene, link_pose, parent_of_link)
     for material_name in referenced_materials(scene):
         if material_name not in scene.materials:
-            scene.materials[material_name] = material(bpy, path, material_name, scene.warnings)
+            scene.materials[material_name] = material(bpy, path, material_name, scene.warnings, scene.opened)
 
 
 def _asset_objects(bpy) -> list:
@@ -110,7 +110,7 @@ def _read_object(path: Path, ob, depsgraph, link: str, link_pose: np.ndarray, sc
         visual_names.append(name)
         scene.parts.append(Part(link, ob.name, ir.Visual(name, material_name, (mesh,), pose), rest))
         if material_name not in scene.materials:
-            scene.materials[material_name] = material(bpy, path, material_name, scene.warnings)
+            scene.materials[material_name] = material(bpy, path, material_name, scene.warnings, scene.opened)
     scene.visuals_of[ob.name] = tuple(visual_names)
     if "state" in ob.keys():
         scene.bindings.extend(authored_bindings(path, ob, visual_names, rest, keys, bpy))
