@@ -206,12 +206,14 @@ def baseline(dataset_folder: Path, out: Path | None):
 
 @main.command()
 @OUT
-@click.option("--port", type=click.IntRange(0, 65535), default=8000, show_default=True,
-              help="port on 127.0.0.1 (0: any free one)")
+@click.option("--port", type=click.IntRange(0, 65535), default=None,
+              help="port on 127.0.0.1 (default: 8000, or a free one when 8000 is taken; 0: any free one)")
 @user_errors
-def view(out: Path, port: int):
-    """Serve OUT on 127.0.0.1 for the web viewer (OUT/viewer/index.html) and the globe."""
-    from .viewer.serve import address, server
+def view(out: Path, port: int | None):
+    """Serve OUT on 127.0.0.1 for the web viewer (OUT/viewer/index.html) and the globe:
+    its regular files only (no dotfiles, no folder listings, no symlinks out of OUT),
+    to requests addressed to 127.0.0.1, localhost or [::1] at the port served."""
+    from .viewer.serve import DEFAULT_PORT, address, server
 
     page = out / "viewer" / "index.html"
     if not page.is_file():
@@ -222,8 +224,11 @@ def view(out: Path, port: int):
     try:
         srv = server(out, port)
     except OSError as e:
-        raise UserError(out, None, f"cannot serve on 127.0.0.1:{port}: {e.strerror} (try --port 0)") from None
+        raise UserError(out, None, f"cannot serve on 127.0.0.1:{port or DEFAULT_PORT}: {e.strerror} "
+                                   "(try --port 0)") from None
     url = address(srv)
+    if port is None and srv.server_address[1] != DEFAULT_PORT:
+        click.echo(f"port {DEFAULT_PORT} is taken: serving on {srv.server_address[1]}", err=True)
     click.echo(f"viewer: {url}viewer/index.html")
     click.echo(f"globe:  {url}viewer/globe.html")
     click.echo("Ctrl-C stops the server")
