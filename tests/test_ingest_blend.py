@@ -4,6 +4,7 @@ subprocess (a clean Blender), plus the sample assets when they exist."""
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -718,3 +719,25 @@ def test_a_file_with_python_says_so_once_in_the_tools_words(fx, tmp_path):
     # a file without Python gets no such warning
     plain = read_blend_path(fx / "full.blend", "full", "test")
     assert "warning.scripts" not in dict(plain.metadata)
+
+
+@pytest.mark.blender
+@blender
+def test_reading_a_blend_in_a_build_worker_leaves_no_temp_folder(fx, tmp_path):
+    """bpy makes a blender_* session folder in the temp folder and removes it only in
+    its exit handler, which a build's pool worker (os._exit) never ran."""
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    script = textwrap.dedent(f"""
+        from pipeline.builder.executors import Workers, local_pool
+        from pipeline.ingest.blend import read_blend_path
+        pool = local_pool(Workers(1, 1))
+        asset = pool.submit(read_blend_path, {str(fx / "full.blend")!r}, "full", "test").result()
+        pool.shutdown(wait=True)
+        print(len(asset.links))
+    """)
+    env = {**os.environ, "TMPDIR": str(temp)}
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=ROOT, env=env)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert int(run.stdout.split()[-1]) >= 1  # the worker did read the file
+    assert sorted(p.name for p in temp.iterdir()) == []

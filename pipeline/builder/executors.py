@@ -136,10 +136,15 @@ def local_pool(workers: Workers) -> Executor:
     import multiprocessing  # only when a task runs: a no-op build and the CLI's options need none
     from concurrent.futures import ProcessPoolExecutor
 
+    from ..scratch import pool_folder, remove_with
+
     context = multiprocessing.get_context("spawn")
     slots = context.Value("i", 0)  # each worker takes the next: the CPU it keeps to on a one-core task
-    return ProcessPoolExecutor(max_workers=workers.count, mp_context=context, initializer=init_worker,
-                               initargs=(workers.threads, workers.cpus, slots, workers.memory))
+    temp = pool_folder()  # the workers' temp folders (Blender's among them), whatever becomes of them
+    pool = ProcessPoolExecutor(max_workers=workers.count, mp_context=context, initializer=init_worker,
+                               initargs=(workers.threads, workers.cpus, slots, workers.memory, temp))
+    remove_with(pool, temp)
+    return pool
 
 
 # In a pool worker: the CPUs of the build, and the one this worker keeps to when its
@@ -150,7 +155,8 @@ _OWN_CPU: int | None = None
 _EXIT_FIRST = False
 
 
-def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: int | None = None) -> None:
+def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: int | None = None,
+                temp: str | None = None) -> None:
     """Worker initializer. Each worker's native thread pools get its share of the cores
     (N workers each running as many threads as there are cores only trade places);
     a variable the user set is kept. `cpus`: the CPUs a build given fewer cores than
@@ -160,7 +166,7 @@ def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: in
     address-space limit (Workers.memory), inherited by the processes its tasks start.
     bpy is imported by the first read of a .blend in a worker, not here: a worker that
     reads none (the source, geometry and package tasks of an edit's chain) never pays
-    for it."""
+    for it. `temp`: the folder the worker keeps its temporary files in (scratch)."""
     global _CPUS, _OWN_CPU, _EXIT_FIRST
     if memory is not None:
         import resource
@@ -186,6 +192,9 @@ def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: in
     import multiprocessing
 
     if multiprocessing.parent_process() is not None:
+        from ..scratch import use_temp_folder
+
+        use_temp_folder(temp)  # before bpy makes its session folder: _exit_now skips its removal
         atexit.register(_exit_now)
         _EXIT_FIRST = True
 
@@ -201,6 +210,9 @@ def _hold_to(cores: int) -> None:
 
 
 def _exit_now() -> None:
+    from ..scratch import remove_temp_folder
+
+    remove_temp_folder()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(0)
