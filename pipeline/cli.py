@@ -124,9 +124,11 @@ def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cac
 @user_errors
 def validate(sources: Path, out: Path):
     """Validate the build; writes OUT/reports/, exits 1 on errors."""
+    from .progress import bar
     from .validate.report import validate_build
 
-    summary = validate_build(sources, out)
+    with bar("validating") as progress:
+        summary = validate_build(sources, out, progress)
     click.echo(f"{summary['errors']} errors, {summary['warnings']} warnings -> {out / 'reports'}")
     if summary["errors"]:
         sys.exit(1)
@@ -180,14 +182,19 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
             workers: int):
     """Render a labelled image set (images, instance masks, depth, COCO, frames.jsonl)
     from the built scene OUT into OUT/datasets/<name>/; a stopped run resumes."""
-    from .runtime.render.dataset import dask_frames, run_dataset
+    from .runtime.render.dataset import blender_log, dask_frames, run_dataset
+
+    from .progress import bar
 
     pool = None
     if executor == "dask":
         from .builder.dask_executor import dask_executor
 
         pool = dask_frames(dask_executor, scheduler)
-    folder = run_dataset(config, out, frames=frames, pool=pool, executor=executor, workers=workers, sources=sources)
+    with bar("frames") as progress:
+        folder = run_dataset(config, out, frames=frames, pool=pool, executor=executor, workers=workers,
+                             sources=sources, progress=progress.update)
+    click.echo(f"Blender's log: {blender_log(out, folder.name)}", err=True)
     click.echo(str(folder))
 
 
