@@ -6,6 +6,7 @@ User errors exit 1 with one line naming the file and the object; usage errors ex
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import sys
@@ -152,16 +153,24 @@ def run(scenario: Path, out: Path):
 @OUT
 @user_errors
 def render(scenario: Path | None, study: bool, out: Path):
-    """Render image sets with labels and the study's image metrics."""
+    """Render image sets with labels and the study's image metrics (Blender's log:
+    OUT/logs/render_<scenario or study>.log)."""
+    from .progress import bar, output_to
     from .runtime.render.scenario import render_scenario
     from .runtime.render.study import render_study
 
-    if study:
-        render_study(out)
-    elif scenario is not None:
-        render_scenario(scenario, out)
-    else:
+    if not study and scenario is None:
         raise click.UsageError("give a SCENARIO or --study")
+    log = out / "logs" / f"render_{'study' if study else scenario.stem}.log"
+    if out.is_dir():  # else the renderer says what is missing, and no build folder appears
+        log.parent.mkdir(exist_ok=True)
+        log.write_bytes(b"")  # this run's
+    with bar("frames") as progress, (output_to(log) if out.is_dir() else contextlib.nullcontext()):
+        if study:
+            render_study(out, progress=progress.update)
+        else:
+            render_scenario(scenario, out, progress=progress.update)
+    click.echo(f"Blender's log: {log}", err=True)
 
 
 @main.command()
