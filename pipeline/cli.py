@@ -215,9 +215,12 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
 def baseline(dataset_folder: Path, out: Path | None):
     """The study's gauge reader over a dataset's conditions: reading error against sun
     elevation and local time, into OUT/reports/baseline_<name>.json and .html."""
+    from .progress import bar
     from .runtime.render.baseline import run_baseline
 
-    click.echo(str(run_baseline(dataset_folder, out)))
+    with bar("frames") as progress:
+        report = run_baseline(dataset_folder, out, progress=progress.update)
+    click.echo(str(report))
 
 
 @main.command()

@@ -4,6 +4,7 @@ code writes on file descriptors 1 and 2) into a file instead of the terminal."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from contextlib import contextmanager
@@ -12,25 +13,37 @@ from typing import Iterator
 
 
 class Bar:
-    """One bar: a count of steps done out of a total that may grow as work is found."""
+    """One bar: a count of steps done out of a total that may grow as work is found.
+    It appears when it is first told of some work: an error before that comes alone."""
 
-    def __init__(self, progress, task, label: str, total: int | None):
-        self._progress, self._task, self._label, self._total = progress, task, label, total
+    def __init__(self, progress, label: str, total: int | None):
+        self._progress, self._label, self._total = progress, label, total
+        self._task = None
+
+    def _show(self, **fields) -> None:
+        if self._task is None:
+            self._progress.start()
+            self._task = self._progress.add_task(self._label, total=self._total)
+        self._progress.update(self._task, total=self._total, **fields)
 
     def update(self, done: int, total: int | None = None) -> None:
         if total is not None:
             self._total = total
-        self._progress.update(self._task, completed=done, total=self._total)
+        self._show(completed=done)
 
     def add(self, steps: int) -> None:
         """`steps` more to do."""
         self._total = (self._total or 0) + steps
-        self._progress.update(self._task, total=self._total)
+        self._show()
 
     def step(self, what: str | None = None) -> None:
         """One step done; `what` says what ran (shown beside the bar's label)."""
-        label = self._label if what is None else f"{self._label}: {what}"
-        self._progress.update(self._task, advance=1, description=label)
+        self._show(advance=1, description=self._label if what is None else f"{self._label}: {what}")
+
+    def close(self) -> None:
+        if self._task is not None:
+            self._progress.update(self._task, description=self._label)  # the last step is no news at the end
+            self._progress.stop()
 
 
 @contextmanager
@@ -43,13 +56,22 @@ def bar(label: str, total: int | None = None) -> Iterator[Bar]:
                TimeRemainingColumn())
     sys.stderr.flush()
     # the terminal's stderr as it is now: a block of output_to inside keeps the bar on it
-    with os.fdopen(os.dup(sys.stderr.fileno()), "w") as terminal:
-        with Progress(*columns, console=Console(file=terminal), transient=False) as progress:
-            task = progress.add_task(label, total=total)
-            try:
-                yield Bar(progress, task, label, total)
-            finally:
-                progress.update(task, description=label)  # what the last step was is no news at the end
+    # (a stderr that is no file, as click's test runner gives, is used as it is)
+    try:
+        terminal = os.fdopen(os.dup(sys.stderr.fileno()), "w")
+    except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is both of the last two
+        terminal = contextlib.nullcontext(sys.stderr)
+    with terminal as stream:
+        # sys.stdout and sys.stderr stay what they are: on a terminal rich would swap in
+        # proxies printing above the bar, and what Blender's Python logs (the glTF
+        # importer's handler keeps the stream it found) would reach the terminal
+        progress = Progress(*columns, console=Console(file=stream), transient=False, redirect_stdout=False,
+                            redirect_stderr=False)
+        shown = Bar(progress, label, total)
+        try:
+            yield shown
+        finally:
+            shown.close()
 
 
 @contextmanager
