@@ -49,8 +49,10 @@ def main():
 def info(sources: Path):
     """What the sources hold, and what is wrong with them."""
     from .info import gather, render
+    from .progress import bar
 
-    report = gather(sources)
+    with bar("reading") as progress:
+        report = gather(sources, progress=progress)
     render(report)
     if report.problems:
         sys.exit(1)
@@ -141,9 +143,11 @@ def validate(sources: Path, out: Path):
 @user_errors
 def run(scenario: Path, out: Path):
     """Run a scenario on the built scene OUT: states and variants over time, into OUT/runs/<scenario>/."""
+    from .progress import bar
     from .runtime.run import run_scenario
 
-    summary = run_scenario(scenario, out)
+    with bar("running") as progress:
+        summary = run_scenario(scenario, out, progress=progress)
     click.echo(json.dumps(summary, indent=1, sort_keys=True))
 
 

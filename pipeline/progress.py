@@ -32,7 +32,9 @@ class Bar:
         self._show(completed=done)
 
     def add(self, steps: int) -> None:
-        """`steps` more to do."""
+        """`steps` more to do (none: no bar yet)."""
+        if steps <= 0:
+            return
         self._total = (self._total or 0) + steps
         self._show()
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -79,6 +80,8 @@ def test_validation_report_has_no_errors(sample):
 def test_oil_leak_scenario_runs_on_the_sample(sample):
     proc = twin("run", ROOT / "sources" / "scenarios" / "oil_leak.toml", "--out", sample)
     assert proc.returncode == 0, proc.stderr[-4000:]
+    assert re.search(r"running\s.*\s4/4\s", proc.stderr), proc.stderr  # simulation and appliers, on stderr
+    assert json.loads(proc.stdout)["steps"] >= 60  # stdout: the summary alone
     run = sample / "runs" / "oil_leak"
     lines = (run / "states.jsonl").read_text().splitlines()
     assert len(lines) >= 60
