@@ -6,6 +6,7 @@ User errors exit 1 with one line naming the file and the object; usage errors ex
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import sys
@@ -48,8 +49,10 @@ def main():
 def info(sources: Path):
     """What the sources hold, and what is wrong with them."""
     from .info import gather, render
+    from .progress import bar
 
-    report = gather(sources)
+    with bar("reading") as progress:
+        report = gather(sources, progress=progress)
     render(report)
     if report.problems:
         sys.exit(1)
@@ -124,9 +127,11 @@ def build(sources: Path, out: Path, jobs: int | None, only: tuple[str, ...], cac
 @user_errors
 def validate(sources: Path, out: Path):
     """Validate the build; writes OUT/reports/, exits 1 on errors."""
+    from .progress import bar
     from .validate.report import validate_build
 
-    summary = validate_build(sources, out)
+    with bar("validating") as progress:
+        summary = validate_build(sources, out, progress)
     click.echo(f"{summary['errors']} errors, {summary['warnings']} warnings -> {out / 'reports'}")
     if summary["errors"]:
         sys.exit(1)
@@ -138,9 +143,11 @@ def validate(sources: Path, out: Path):
 @user_errors
 def run(scenario: Path, out: Path):
     """Run a scenario on the built scene OUT: states and variants over time, into OUT/runs/<scenario>/."""
+    from .progress import bar
     from .runtime.run import run_scenario
 
-    summary = run_scenario(scenario, out)
+    with bar("running") as progress:
+        summary = run_scenario(scenario, out, progress=progress)
     click.echo(json.dumps(summary, indent=1, sort_keys=True))
 
 
@@ -151,16 +158,24 @@ def run(scenario: Path, out: Path):
 @OUT
 @user_errors
 def render(scenario: Path | None, study: bool, sources: Path, out: Path):
-    """Render image sets with labels and the study's image metrics."""
+    """Render image sets with labels and the study's image metrics (Blender's log:
+    OUT/logs/render_<scenario or study>.log)."""
+    from .progress import bar, output_to
     from .render.scenario import render_scenario
     from .render.study import render_study
 
-    if study:
-        render_study(out, sources)
-    elif scenario is not None:
-        render_scenario(scenario, out, sources)
-    else:
+    if not study and scenario is None:
         raise click.UsageError("give a SCENARIO or --study")
+    log = out / "logs" / f"render_{'study' if study else scenario.stem}.log"
+    if out.is_dir():  # else the renderer says what is missing, and no build folder appears
+        log.parent.mkdir(exist_ok=True)
+        log.write_bytes(b"")  # this run's
+    with bar("frames") as progress, (output_to(log) if out.is_dir() else contextlib.nullcontext()):
+        if study:
+            render_study(out, sources, progress=progress.update)
+        else:
+            render_scenario(scenario, out, sources, progress=progress.update)
+    click.echo(f"Blender's log: {log}", err=True)
 
 
 @main.command()
@@ -181,14 +196,19 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
             workers: int):
     """Render a labelled image set (images, instance masks, depth, COCO, frames.jsonl)
     from the built scene OUT into OUT/datasets/<name>/; a stopped run resumes."""
-    from .datasets.run import dask_frames, run_dataset
+    from .datasets.run import blender_log, dask_frames, run_dataset
+
+    from .progress import bar
 
     pool = None
     if executor == "dask":
         from .engine.dask_executor import dask_executor
 
         pool = dask_frames(dask_executor, scheduler)
-    folder = run_dataset(config, out, frames=frames, pool=pool, executor=executor, workers=workers, sources=sources)
+    with bar("frames") as progress:
+        folder = run_dataset(config, out, frames=frames, pool=pool, executor=executor, workers=workers,
+                             sources=sources, progress=progress.update)
+    click.echo(f"Blender's log: {blender_log(out, folder.name)}", err=True)
     click.echo(str(folder))
 
 
@@ -202,18 +222,22 @@ def baseline(dataset_folder: Path, out: Path | None, sources: Path):
     """The study's gauge reader over a dataset's conditions: reading error against sun
     elevation and local time, into OUT/reports/baseline_<name>.json and .html."""
     from .perception.baseline import run_baseline
+    from .progress import bar
 
-    click.echo(str(run_baseline(dataset_folder, out, sources=sources)))
-
+    with bar("frames") as progress:
+        report = run_baseline(dataset_folder, out, sources=sources, progress=progress.update)
+    click.echo(str(report))
 
 @main.command()
 @OUT
-@click.option("--port", type=click.IntRange(0, 65535), default=8000, show_default=True,
-              help="port on 127.0.0.1 (0: any free one)")
+@click.option("--port", type=click.IntRange(0, 65535), default=None,
+              help="port on 127.0.0.1 (default: 8000, or a free one when 8000 is taken; 0: any free one)")
 @user_errors
-def view(out: Path, port: int):
-    """Serve OUT on 127.0.0.1 for the web viewer (OUT/viewer/index.html) and the globe."""
-    from .viewer.serve import address, server
+def view(out: Path, port: int | None):
+    """Serve OUT on 127.0.0.1 for the web viewer (OUT/viewer/index.html) and the globe:
+    its regular files only (no dotfiles, no folder listings, no symlinks out of OUT),
+    to requests addressed to 127.0.0.1, localhost or [::1] at the port served."""
+    from .viewer.serve import DEFAULT_PORT, address, server
 
     page = out / "viewer" / "index.html"
     if not page.is_file():
@@ -224,8 +248,11 @@ def view(out: Path, port: int):
     try:
         srv = server(out, port)
     except OSError as e:
-        raise UserError(out, None, f"cannot serve on 127.0.0.1:{port}: {e.strerror} (try --port 0)") from None
+        raise UserError(out, None, f"cannot serve on 127.0.0.1:{port or DEFAULT_PORT}: {e.strerror} "
+                                   "(try --port 0)") from None
     url = address(srv)
+    if port is None and srv.server_address[1] != DEFAULT_PORT:
+        click.echo(f"port {DEFAULT_PORT} is taken: serving on {srv.server_address[1]}", err=True)
     click.echo(f"viewer: {url}viewer/index.html")
     click.echo(f"globe:  {url}viewer/globe.html")
     click.echo("Ctrl-C stops the server")

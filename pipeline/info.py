@@ -40,9 +40,10 @@ def _triangles(cfg: config.AssetConfig, build: Path) -> int | None:
     return read_source(cfg).triangle_count(0)
 
 
-def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
+def gather(sources: Path, build: Path = Path("build"), progress=None) -> InfoReport:
     """Every problem of the sources, each file on its own: a broken site.toml still
-    lets the assets be checked, a broken asset the others and the floor plan."""
+    lets the assets be checked, a broken asset the others and the floor plan.
+    `progress`: a progress.Bar that each asset read advances."""
     sources = Path(sources)
     r = InfoReport(sources=sources)
     try:
@@ -53,6 +54,8 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
         r.problems.append(str(e))
     assets, problems = config.load_assets(sources)
     r.problems.extend(str(p) for p in problems)
+    if progress is not None:
+        progress.add(len(assets))
     for asset_id, cfg in sorted(assets.items()):
         entry = {"category": cfg.category, "source": cfg.source.name, "triangles": None}
         try:
@@ -64,6 +67,8 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
         except Exception as e:  # noqa: BLE001 - a reader's bug on this file hides no other problem
             r.problems.append(f"{cfg.source}: cannot be read ({type(e).__name__}: {e})")
         r.assets[asset_id] = entry
+        if progress is not None:
+            progress.step(asset_id)
     for asset_id in sorted(config.asset_ids(sources) - set(assets)):  # its asset.toml is a problem above
         r.assets[asset_id] = {"category": "?", "source": "?", "triangles": None}
     if site is None:  # the floor plan is read with site.toml's levels and block names

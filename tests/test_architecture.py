@@ -132,10 +132,10 @@ def test_no_module_over_600_lines():
 
 # --- modules, the engine, perception ---------------------------------------------
 
-# What the engine may import: the modules that know no domain (errors, files, digests
-# and fork_join's share of the cores). A task's domain reaches it only through the
-# task's action, which the builder hands it.
-ENGINE_MAY_IMPORT = {"engine", "errors", "files", "digest", "fork_join"}
+# What the engine may import: the modules that know no domain (errors, files, digests,
+# a worker's scratch folder and fork_join's share of the cores). A task's domain
+# reaches it only through the task's action, which the builder hands it.
+ENGINE_MAY_IMPORT = {"engine", "errors", "files", "digest", "fork_join", "scratch"}
 
 
 @lru_cache(maxsize=1)
@@ -205,3 +205,24 @@ def test_perception_reaches_no_module_that_imports_bpy():
     bad = {m: sorted(reaches(m, graph) & with_bpy) for m in graph if m.startswith("pipeline.perception")}
     bad = {m: b for m, b in bad.items() if b or m in with_bpy}
     assert not bad, f"perception reaches bpy: {bad}"
+
+
+def test_every_import_of_pipeline_names_a_module_that_exists():
+    """Lazy imports inside functions run only when their branch does: a relative import
+    left one level off by a move would fail first in a user's hands."""
+    modules = {_dotted(p) for p in _modules()}
+    broken = []
+    for path in _modules():
+        package = _dotted(path) if path.name == "__init__.py" else _dotted(path).rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and (node.level or (node.module or "").startswith("pipeline")):
+                base = node.module or ""
+                if node.level:
+                    up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(up + ([node.module] if node.module else []))
+                if base not in modules:
+                    broken.append(f"{_dotted(path)}:{node.lineno}: from {'.' * node.level}{node.module or ''}")
+            elif isinstance(node, ast.Import):
+                broken += [f"{_dotted(path)}:{node.lineno}: import {a.name}" for a in node.names
+                           if a.name.startswith("pipeline") and a.name not in modules]
+    assert not broken, broken

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -237,6 +238,7 @@ def test_the_baseline_reads_a_rendered_dataset(close_dataset, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "baseline", str(close_dataset), "--out",
                            str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
+    assert re.search(r"frames\s.*\s3/3\s", proc.stderr), proc.stderr  # its progress, on stderr
     report = json.loads((tmp_path / "reports" / "baseline_close.json").read_text())
     gauges = report["gauges"]
     frames = [json.loads(line) for line in (close_dataset / "frames.jsonl").read_text().splitlines()]

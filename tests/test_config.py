@@ -116,3 +116,18 @@ def test_cli_reports_one_line_and_exit_1(tmp_path):
     assert "Traceback" not in proc.stderr
     lines = [l for l in proc.stderr.splitlines() if l.strip()]
     assert len(lines) == 1 and "plan.crs" in lines[0] and "site.toml" in lines[0]
+
+
+def test_cli_info_counts_the_assets_it_reads_on_stderr(tmp_path):
+    """`twin info` reads every asset's source (tens of seconds on the sample): a bar on
+    stderr counts them, and stdout keeps the report alone."""
+    import re
+
+    import mini_sources
+
+    src = mini_sources.make(tmp_path / "src")
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "info", "--sources", str(src)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert re.search(r"reading\s.*\s2/2\s", proc.stderr), proc.stderr  # kiosk and pole
+    assert "2/2" not in proc.stdout and "kiosk" in proc.stdout

@@ -270,3 +270,23 @@ def test_frames_render_when_the_calling_process_imported_bpy(sample_build, tmp_p
                           capture_output=True, text=True, cwd=ROOT, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert (out / "datasets" / "tiny" / "records" / "000000.json").is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_run_shows_a_bar_keeps_blenders_log_in_a_file_and_leaves_no_temp_files(sample_build, tmp_path):
+    """The terminal gets a progress bar and the dataset's path, Blender's log (the glTF
+    importer's thousands of lines) goes to OUT/logs/, and the system temp folder keeps
+    nothing: no twin_render_*/frame.exr, no blender_* session folder."""
+    out = _scene_copy(sample_build, tmp_path / "b")
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    proc = _twin("dataset", _config(tmp_path), "--out", out, "--frames", "1", env={**os.environ, "TMPDIR": str(temp)})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.strip() == str(out / "datasets" / "tiny")
+    log = out / "logs" / "dataset_tiny.log"
+    assert "Blender create Mesh node" in log.read_text()
+    assert "Blender create" not in proc.stdout + proc.stderr and "INFO" not in proc.stdout + proc.stderr
+    assert "frames" in proc.stderr and "1/1" in proc.stderr  # the bar, done
+    assert str(log) in proc.stderr
+    assert sorted(p.name for p in temp.rglob("*")) == []

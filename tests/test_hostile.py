@@ -206,6 +206,9 @@ def test_blend_driver_and_text_block_never_run(case, tmp_path):
     proc = build(src, out)
     assert "Traceback" not in proc.stderr
     assert not list(tmp_path.glob("marker*")), "code embedded in the .blend ran"
+    # the build says so once, in its own words, naming the file (not Blender's log)
+    assert "auto-execution" not in proc.stderr and "PyDriver" not in proc.stderr
+    assert proc.stderr.count("kiosk.blend: its 1 Python driver (box.location[0]) and 1 script") == 1, proc.stderr
 
 
 # --- XML the pipeline parses: the package checks of `twin validate` ------------------------

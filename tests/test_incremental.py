@@ -387,3 +387,34 @@ def test_editing_a_file_the_reader_opens_rebuilds_the_asset(mini, tmp_path):
     back = explain(sources, out, *only)
     assert ran(back) == {"source:panel"} and back["source:panel"]["changed"] == ["opened green.png"]
     assert _package_images(out) == before
+
+
+def test_a_plain_build_ends_with_a_summary_of_what_ran(mini, tmp_path):
+    sources, _ = mini
+    src = tmp_path / "src"
+    shutil.copytree(sources, src)
+    out = tmp_path / "build"
+    summary = re.compile(r"^built (\d+) of (\d+) tasks(?: \((.+)\))?, (\d+) fresh, in \d+\.\d s$")
+
+    def last_line(proc) -> re.Match:
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        m = summary.match(proc.stderr.strip().splitlines()[-1])
+        assert m, proc.stderr[-1000:]
+        return m
+
+    first = last_line(twin("build", "--sources", src, "--out", out))
+    total = int(first.group(2))
+    assert int(first.group(1)) == total > 5 and int(first.group(4)) == 0
+    assert "source:pole" in first.group(3) and "more" in first.group(3)
+    noop = last_line(twin("build", "--sources", src, "--out", out))
+    assert noop.groups() == ("0", str(total), None, str(total))
+    nudge_source(src / "assets" / "pole" / "pole.obj", 0.01)
+    proc = twin("build", "--sources", src, "--out", out, "--explain")
+    edit = last_line(proc)
+    ran_now = sorted(line.split()[1].rstrip(":") for line in proc.stdout.splitlines() if line.startswith("RAN "))
+    assert "source:pole" in ran_now and 0 < len(ran_now) < total
+    assert int(edit.group(1)) == len(ran_now) and int(edit.group(4)) == total - len(ran_now)
+    assert set(edit.group(3).split(" and ")[0].split(", ")) <= set(ran_now)
+    # --json: the document alone on stdout, no summary
+    proc = twin("build", "--sources", src, "--out", out, "--json")
+    assert len(json.loads(proc.stdout)["tasks"]) == total and "built" not in proc.stderr

@@ -4,6 +4,7 @@ subprocess (a clean Blender), plus the sample assets when they exist."""
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -693,3 +694,51 @@ def test_a_file_from_a_newer_blender_is_read_with_a_warning_that_reaches_the_use
     result = build_source(tmp_path / "staging", str(cfg.path))
     assert result["warnings"] == [warning]
     assert source_warnings(BuildReport(results={"source:newer": result})) == [f"newer: warning: {warning}"]
+
+
+@pytest.mark.blender
+@blender
+def test_a_file_with_python_says_so_once_in_the_tools_words(fx, tmp_path):
+    """Blender's own log would tell the user to "enable auto-execution": the reader
+    says instead, once, naming the file, that its Python was not run and why."""
+    hostile = tmp_path / "hostile.blend"
+    shutil.copy(fx / "hostile.blend", hostile)
+    script = textwrap.dedent(f"""
+        from pipeline.ingest.blend import read_blend_path
+        asset = read_blend_path({str(hostile)!r}, "h", "test")
+        print(dict(asset.metadata).get("warning.scripts", "none"))
+    """)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "auto-execution" not in run.stdout + run.stderr
+    assert "PyDriver" not in run.stdout + run.stderr and "BPY_driver_exec" not in run.stderr
+    warning = run.stdout.strip().splitlines()[-1]
+    assert warning.startswith("hostile.blend: ") and "not run" in warning and "untrusted" in warning
+    assert "tri.location[0]" in warning and "evil.py" in warning
+    assert not list(fx.glob("marker*"))
+    # a file without Python gets no such warning
+    plain = read_blend_path(fx / "full.blend", "full", "test")
+    assert "warning.scripts" not in dict(plain.metadata)
+
+
+@pytest.mark.blender
+@blender
+def test_reading_a_blend_in_a_build_worker_leaves_no_temp_folder(fx, tmp_path):
+    """bpy makes a blender_* session folder in the temp folder and removes it only in
+    its exit handler, which a build's pool worker (os._exit) never ran."""
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    script = textwrap.dedent(f"""
+        from pipeline.engine.executors import local_pool
+        from pipeline.engine.worker import Workers
+        from pipeline.ingest.blend import read_blend_path
+        pool = local_pool(Workers(1, 1))
+        asset = pool.submit(read_blend_path, {str(fx / "full.blend")!r}, "full", "test").result()
+        pool.shutdown(wait=True)
+        print(len(asset.links))
+    """)
+    env = {**os.environ, "TMPDIR": str(temp)}
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=ROOT, env=env)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert int(run.stdout.split()[-1]) >= 1  # the worker did read the file
+    assert sorted(p.name for p in temp.iterdir()) == []

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -192,3 +193,35 @@ def test_html_renders_in_chromium(built, tmp_path):
     src = doc.xpath("//img/@src")[0]
     assert (root / "reports" / src).resolve() == (root / "models" / "test_arm" / "thumbnail.png").resolve()
     assert (root / "reports" / src).is_file()
+
+
+class _Steps:
+    """A stand-in for progress.Bar that records what it is told."""
+
+    def __init__(self):
+        self.total, self.done = 0, []
+
+    def add(self, steps: int) -> None:
+        self.total += steps
+
+    def step(self, what: str | None = None) -> None:
+        assert len(self.done) < self.total, f"{what}: a step beyond the announced total"
+        self.done.append(what)
+
+
+def test_validation_reports_progress_step_by_step(tmp_path):
+    root = make_build(tmp_path)
+    steps = _Steps()
+    report.validate_build(root, root, steps)
+    assert len(steps.done) == steps.total > 5  # the bar ends full, never beyond
+    assert {"package checks", "ign sdf", "usd validation", "gltf validator", "gazebo probe"} <= set(steps.done)
+
+
+def test_cli_validate_shows_a_progress_bar_on_stderr(tmp_path):
+    root = make_build(tmp_path)
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "validate", "--sources", str(root), "--out",
+                           str(root)], capture_output=True, text=True, timeout=600)
+    assert "Traceback" not in proc.stderr and proc.returncode == 1
+    m = re.search(r"(\d+)/(\d+)", proc.stderr)
+    assert m and m.group(1) == m.group(2) and int(m.group(2)) > 5, proc.stderr
+    assert "errors" in proc.stdout and "/" not in proc.stdout.split("->")[0]

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -83,6 +84,8 @@ def test_validation_report_has_no_errors(sample):
 def test_oil_leak_scenario_runs_on_the_sample(sample):
     proc = twin("run", ROOT / "sources" / "scenarios" / "oil_leak.toml", "--out", sample)
     assert proc.returncode == 0, proc.stderr[-4000:]
+    assert re.search(r"running\s.*\s4/4\s", proc.stderr), proc.stderr  # simulation and appliers, on stderr
+    assert json.loads(proc.stdout)["steps"] >= 60  # stdout: the summary alone
     run = sample / "runs" / "oil_leak"
     lines = (run / "states.jsonl").read_text().splitlines()
     assert len(lines) >= 60
@@ -216,3 +219,31 @@ def test_study_viewpoint_faces_the_late_sun_with_a_clear_view(sample):
     cfg = STUDY
     centre, normal = gauge.dial_world(site.pose(site.placement(cfg.target)))
     assert float(-axis @ normal) > math.cos(cfg.max_obliquity) - 1e-9
+
+
+def test_twin_render_counts_frames_and_keeps_blenders_log_in_a_file(sample, tmp_path):
+    """`twin render` renders in its own process: Blender's log goes to OUT/logs/, the
+    terminal gets a bar of the frames, and the temp folder keeps nothing."""
+    import os
+    import re
+
+    out = tmp_path / "build"
+    out.mkdir()
+    for sub in ("models", "scene"):
+        (out / sub).symlink_to(sample / sub)
+    scenario = tmp_path / "short.toml"
+    text = (ROOT / "sources" / "scenarios" / "oil_leak.toml").read_text()
+    scenario.write_text(text.replace("duration_s = 60.0", "duration_s = 1.0"))
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "render", str(scenario), "--out", str(out)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=3600, env={**os.environ, "TMPDIR": str(temp)})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    log = out / "logs" / "render_short.log"
+    assert "Blender create Mesh node" in log.read_text()
+    assert "Blender create" not in proc.stdout + proc.stderr and "INFO" not in proc.stdout + proc.stderr
+    m = re.search(r"frames\s.*?(\d+)/(\d+)", proc.stderr)
+    assert m and m.group(1) == m.group(2), proc.stderr
+    rendered = sorted((out / "runs" / "oil_leak" / "render").glob("frame_*.png"))
+    assert len(rendered) == int(m.group(2)) >= 1
+    assert sorted(p.name for p in temp.rglob("*")) == []

@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 import time
 from concurrent.futures import Executor, as_completed
 from contextlib import contextmanager
@@ -69,8 +70,13 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
     union = sorted({t for i in range(cfg.count) for t in planner.plan(i).visible_tags})
     plan_s = time.perf_counter() - t0
     todo = [i for i in range(n) if not _done(folder, i)]
+    log = blender_log(out, cfg.name)
+    log.parent.mkdir(parents=True, exist_ok=True)
+    log.write_bytes(b"")  # this run's
     job = {"build": str(out), "sources": str(sources), "config": str(Path(config_path).resolve()),
-           "folder": str(folder), "union": union}
+           "folder": str(folder), "union": union, "log": str(log)}
+    if progress:
+        progress(0, len(todo))
     t0 = time.perf_counter()
     seconds = []
     if todo:
@@ -80,7 +86,8 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
                 try:
                     result = f.result()
                 except Exception as e:  # noqa: BLE001 - a worker that died (a crash, killed for memory)
-                    raise UserError(cfg.path, "frames", f"a worker stopped: {type(e).__name__}: {e}") from None
+                    raise UserError(cfg.path, "frames", f"a worker stopped: {type(e).__name__}: {e} "
+                                                        f"(Blender's log: {log})") from None
                 if not result["ok"]:
                     raise UserError(cfg.path, f"frame {result['frame_id']}", result["error"])
                 seconds.append(result["seconds"])
@@ -92,6 +99,12 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
         {"frames": n, "rendered": len(todo), "executor": executor, "workers": workers, "plan_s": plan_s,
          "wall_s": wall, "frame_s": seconds, "scene_placements": len(union)}, indent=1, sort_keys=True) + "\n")
     return folder
+
+
+def blender_log(out: Path, name: str) -> Path:
+    """Where the Blender processes of dataset `name` write their log (thousands of
+    lines a run: not the terminal's)."""
+    return Path(out) / "logs" / f"dataset_{name}.log"
 
 
 def _claim(folder: Path, cfg) -> None:
@@ -163,23 +176,33 @@ def local_frames(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
     """Spawned processes (Blender does not survive a fork), each replaced after
     `tasks_per_worker` frames, so a long run's memory stays that of a fresh one."""
     import multiprocessing
+    import shutil
     from concurrent.futures import ProcessPoolExecutor
 
+    from ..scratch import pool_folder
+
+    temp = pool_folder()  # the scratch frames and Blender's session folders, whatever becomes of a process
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               max_tasks_per_child=tasks_per_worker, initializer=_init_blender_process)
+                               max_tasks_per_child=tasks_per_worker, initializer=_init_blender_process,
+                               initargs=(temp,))
     try:
         yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+        shutil.rmtree(temp, ignore_errors=True)
 
 
-def _init_blender_process() -> None:
+def _init_blender_process(temp: str | None = None) -> None:
     """A spawned child starts with its parent's sys.path: when the parent imported bpy,
     that holds Blender's scripts/modules, whose pure-Python `bpy` package would shadow
-    the real one (No module named '_bpy'). Those entries go; importing bpy adds them back."""
+    the real one (No module named '_bpy'). Those entries go; importing bpy adds them back.
+    Its temporary files go to a folder of its own in `temp` (scratch)."""
     import sys
 
+    from ..scratch import use_temp_folder
+
     sys.path[:] = [p for p in sys.path if f"{os.sep}bpy{os.sep}" not in p]
+    use_temp_folder(temp)
     _exit_with_parent()
 
 
@@ -236,6 +259,7 @@ def render_frame(job: dict, index: int) -> dict:
     fid = frame_id(index)
     try:
         t0 = time.perf_counter()
+        _log_to(job.get("log"))
         ctx = _context(job)
         _frame(ctx, Path(job["folder"]), ctx["planner"].plan(index))
         return {"ok": True, "frame_id": fid, "seconds": time.perf_counter() - t0}
@@ -245,6 +269,26 @@ def render_frame(job: dict, index: int) -> dict:
         import traceback
 
         return {"ok": False, "frame_id": fid, "error": f"{type(e).__name__}: {e}\n{traceback.format_exc()}"}
+
+
+_LOG: list[str] = []  # in a Blender process: the log its file descriptors 1 and 2 go to
+
+
+def _log_to(path: str | None) -> None:
+    """Blender logs on file descriptors 1 and 2 of its process (the terminal's, in a
+    spawned child): a frame's process appends both to the run's log, from its first
+    frame on, before bpy is imported. Never the calling process's own."""
+    import multiprocessing
+
+    if not path or _LOG == [path] or multiprocessing.parent_process() is None:
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+    _LOG[:] = [path]
 
 
 def _context(job: dict) -> dict:

@@ -33,10 +33,15 @@ def local_pool(workers: Workers) -> Executor:
     import multiprocessing  # only when a task runs: a no-op build and the CLI's options need none
     from concurrent.futures import ProcessPoolExecutor
 
+    from ..scratch import pool_folder, remove_with
+
     context = multiprocessing.get_context("spawn")
     slots = context.Value("i", 0)  # each worker takes the next: the CPU it keeps to on a one-core task
-    return ProcessPoolExecutor(max_workers=workers.count, mp_context=context, initializer=init_worker,
-                               initargs=(workers.threads, workers.cpus, slots, workers.memory))
+    temp = pool_folder()  # the workers' temp folders (Blender's among them), whatever becomes of them
+    pool = ProcessPoolExecutor(max_workers=workers.count, mp_context=context, initializer=init_worker,
+                               initargs=(workers.threads, workers.cpus, slots, workers.memory, temp))
+    remove_with(pool, temp)
+    return pool
 
 
 # --- the calling process -------------------------------------------------------

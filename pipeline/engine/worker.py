@@ -120,7 +120,8 @@ _OWN_CPU: int | None = None
 _EXIT_FIRST = False
 
 
-def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: int | None = None) -> None:
+def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: int | None = None,
+                temp: str | None = None) -> None:
     """Worker initializer. Each worker's native thread pools get its share of the cores
     (N workers each running as many threads as there are cores only trade places);
     a variable the user set is kept. `cpus`: the CPUs a build given fewer cores than
@@ -130,7 +131,7 @@ def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: in
     address-space limit (Workers.memory), inherited by the processes its tasks start.
     bpy is imported by the first read of a .blend in a worker, not here: a worker that
     reads none (the source, geometry and package tasks of an edit's chain) never pays
-    for it."""
+    for it. `temp`: the folder the worker keeps its temporary files in (scratch)."""
     global _CPUS, _OWN_CPU, _EXIT_FIRST
     if memory is not None:
         import resource
@@ -156,6 +157,9 @@ def init_worker(threads: int, cpus: tuple[int, ...] = (), slots=None, memory: in
     import multiprocessing
 
     if multiprocessing.parent_process() is not None:
+        from ..scratch import use_temp_folder
+
+        use_temp_folder(temp)  # before bpy makes its session folder: _exit_now skips its removal
         atexit.register(_exit_now)
         _EXIT_FIRST = True
 
@@ -171,6 +175,9 @@ def _hold_to(cores: int) -> None:
 
 
 def _exit_now() -> None:
+    from ..scratch import remove_temp_folder
+
+    remove_temp_folder()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(0)

@@ -56,14 +56,16 @@ def local_hours(iso: str) -> float:
     return t.hour + t.minute / 60.0 + t.second / 3600.0
 
 
-def score_dataset(folder: Path, site, frames: list[dict]) -> list[dict]:
+def score_dataset(folder: Path, site, frames: list[dict], progress=None) -> list[dict]:
     """One row per gauge a frame (a frames.jsonl record) labels visible, in frame then
-    tag order."""
+    tag order. `progress(done, total)` is called before the first frame and after each."""
     import cv2
 
     dials: dict[str, Dial | None] = {}
     rows = []
-    for f in frames:
+    for i, f in enumerate(frames):
+        if progress:
+            progress(i, len(frames))
         seen = [g for g in f["gauges"] if g.get("visible")]
         if not seen:
             continue
@@ -84,10 +86,12 @@ def score_dataset(folder: Path, site, frames: list[dict]) -> list[dict]:
                    "sun_azimuth_deg": f["sun"]["azimuth_deg"], "irradiance": f["sun"]["irradiance"],
                    "true": g["reading"]}
             rows.append({**row, **score_gauge(bgr, dial, cam_pose, k, g["reading"])})
+    if progress:
+        progress(len(frames), len(frames))
     return rows
 
 
-def run_baseline(folder, out=None, *, sources: Path) -> Path:
+def run_baseline(folder, out=None, *, sources: Path, progress=None) -> Path:
     """`twin baseline`: score the dataset at `folder` (OUT/datasets/<name>/) and write
     OUT/reports/baseline_<name>.json, .html and its plots; OUT defaults to the build
     the dataset lies in. Returns the HTML's path."""
@@ -99,7 +103,7 @@ def run_baseline(folder, out=None, *, sources: Path) -> Path:
     if not (build / "scene" / "placements.json").is_file():
         raise UserError(folder, None, "a dataset folder lies in a build: OUT/datasets/<name>/ beside OUT/scene/")
     site = load_site(build, sources)
-    rows = score_dataset(folder, site, frames)
+    rows = score_dataset(folder, site, frames, progress)
     name = json.loads((folder / "dataset.json").read_text())["dataset"] if (folder / "dataset.json").is_file() \
         else folder.name
     return write_report(Path(out) if out else build, name, folder, rows, frames=len(frames))

@@ -69,11 +69,15 @@ def pointer_binding(site: Site, tag: str) -> dict | None:
 
 
 def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamera, seed: int,
-                 gain: float | None = None, names: list[str] | None = None, meter_each: bool = False) -> list[dict]:
+                 gain: float | None = None, names: list[str] | None = None, meter_each: bool = False,
+                 progress=None) -> list[dict]:
     """Render shots into folder/<name>.png + <name>.json; one scene (loaded once, kept
     between frames), exposure locked at the first shot unless `gain` is given or
-    `meter_each` (the phone re-meters every shot). Returns one record per frame."""
+    `meter_each` (the phone re-meters every shot). Returns one record per frame.
+    `progress(done, total)` is called before the first and after each frame."""
     folder.mkdir(parents=True, exist_ok=True)
+    if progress:
+        progress(0, len(shots))
     lock = (gain, (1.0, 1.0, 1.0)) if gain is not None else None
     bl = CyclesScene(site, cam, seed)
     try:
@@ -82,6 +86,8 @@ def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamer
         for i, shot in enumerate(shots):
             records.append(_one(bl, site, shot, folder, (names or [])[i] if names else f"frame_{i:04d}",
                                 cam, lock))
+            if progress:
+                progress(i + 1, len(shots))
             if lock is None and not meter_each:
                 c = records[-1]["labels"]["camera"]
                 lock = (c["exposure_gain"], c["white_balance"])

@@ -51,14 +51,15 @@ def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[obj
     return scenario, shots
 
 
-def render_scenario(scenario_path, out, sources: Path, *, cam: PhoneCamera | None = None, every: int = 1) -> Path:
+def render_scenario(scenario_path, out, sources: Path, *, cam: PhoneCamera | None = None, every: int = 1,
+                    progress=None) -> Path:
     """`twin render SCENARIO`: frames, labels and a dataset manifest in
     out/runs/<scenario>/render/. Returns the manifest's path."""
     cam = cam or PhoneCamera()
     site = load_site(Path(out), sources)
     scenario, shots = scenario_shots(Path(scenario_path), site, every)
     folder = Path(out) / "runs" / scenario.name / "render"
-    records = render_shots(site, shots, folder, cam=cam, seed=scenario.seed)
+    records = render_shots(site, shots, folder, cam=cam, seed=scenario.seed, progress=progress)
     return dataset_manifest(folder, scenario.name, scenario.seed, cam, records)
 
 

@@ -246,7 +246,7 @@ def face_only(bgr_crop: np.ndarray, site: Site, shot: Shot, cam: PhoneCamera, of
     return out
 
 
-def render_study(out, sources: Path, *, cam: PhoneCamera | None = None) -> Path:
+def render_study(out, sources: Path, *, cam: PhoneCamera | None = None, progress=None) -> Path:
     """`twin render --study`: the conditions of sources/study.toml, metrics C, S, H on
     the gauge ROI set against the study's Table 1, out/reports/study.html + study.json,
     frames in out/reports/study/."""
@@ -261,7 +261,7 @@ def render_study(out, sources: Path, *, cam: PhoneCamera | None = None) -> Path:
     # One scene for the conditions (loaded once, kept between frames); the phone
     # re-meters at each condition.
     records = render_shots(site, [s for _, s in shots], folder, cam=cam, seed=cfg.seed,
-                           names=[n for n, _ in shots], meter_each=True)
+                           names=[n for n, _ in shots], meter_each=True, progress=progress)
     for (name, shot), rec in zip(shots, records):
         x0, y0, x1, y1 = study_roi(rec)
         crop = rec["rgb"][y0:y1, x0:x1, ::-1]

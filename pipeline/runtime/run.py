@@ -115,10 +115,13 @@ def write_states(records: list[dict], path: Path) -> None:
 
 
 def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = None, *,
-                 formats: tuple[str, ...] = ("usd", "gltf", "sdf"), sdf_quantum: float = 0.1) -> dict:
+                 formats: tuple[str, ...] = ("usd", "gltf", "sdf"), sdf_quantum: float = 0.1,
+                 progress=None) -> dict:
     """Run a scenario against a built scene; outputs in out_dir (default
-    build/runs/<scenario name>/). Returns a summary dict."""
+    build/runs/<scenario name>/). Returns a summary dict. `progress`: a progress.Bar
+    that the simulation and each applier advance."""
     t0 = time.perf_counter()
+    step = progress.step if progress is not None else (lambda what=None: None)
     build_dir = Path(build_dir)
     scenario = graph.load_scenario(scenario_path, scene_zone(build_dir))
     observed = load_observed(build_dir)
@@ -128,7 +131,10 @@ def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = No
         raise UserError(scenario.path, "scenario.assets", f"not built: {', '.join(missing)}")
     out = Path(out_dir) if out_dir is not None else build_dir / "runs" / scenario.name
     out.mkdir(parents=True, exist_ok=True)
+    if progress is not None:
+        progress.add(1 + len(formats))
     data, records = simulate(scenario, observed)
+    step("simulate")
     t_sim = time.perf_counter() - t0
     write_states(records, out / "states.jsonl")
     summary = {"scenario": scenario.name, "steps": len(records), "nodes": len(scenario.nodes),
@@ -140,13 +146,16 @@ def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = No
             from . import apply_usd
 
             summary["appliers"]["usd"] = apply_usd.write(data, scenes[0], out / "states.usda")
+        step("usd")  # done, or nothing to apply to
     if "gltf" in formats:
         from . import apply_gltf
 
         summary["appliers"]["gltf"] = apply_gltf.write(data, out / "gltf")
+        step("gltf")
     if "sdf" in formats:
         from . import apply_sdf
 
         summary["appliers"]["sdf"] = apply_sdf.write(data, out / "sdf", quantum=sdf_quantum)
+        step("sdf")
     summary["total_s"] = round(time.perf_counter() - t0, 4)
     return summary

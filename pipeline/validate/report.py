@@ -105,10 +105,16 @@ def _root(joints: list[dict], links: list[str]) -> str | None:
 
 
 class _Clock:
-    """Wall time per validator, for timings.json only."""
+    """Wall time per validator, for timings.json only; each run is a step of
+    `progress` (progress.Bar, or None)."""
 
-    def __init__(self):
+    def __init__(self, progress=None):
         self.seconds: dict[str, float] = {}
+        self.progress = progress
+
+    def expect(self, steps: int) -> None:
+        if self.progress is not None:
+            self.progress.add(steps)
 
     def run(self, key: str, fn, *args):
         t = time.perf_counter()
@@ -116,6 +122,8 @@ class _Clock:
             return fn(*args)
         finally:
             self.seconds[key] = self.seconds.get(key, 0.0) + time.perf_counter() - t
+            if self.progress is not None:
+                self.progress.step(key)
 
 
 def _usd_references(path: Path) -> external.ExternalResult:
@@ -194,14 +202,15 @@ def _scene_files(out: Path, placements: dict | None) -> tuple[str | None, dict[s
                        for ext in ("sdf", "usda", "glb")}
 
 
-def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
-    """(validation.json content, timings). Raises UserError when nothing was built."""
+def build_report(sources: Path, out: Path, progress=None) -> tuple[dict, dict]:
+    """(validation.json content, timings). Raises UserError when nothing was built.
+    `progress`: a progress.Bar that each check and validator run advances."""
     out = Path(out)
     models = out / "models"
     folders = sorted(d for d in models.iterdir() if d.is_dir()) if models.is_dir() else []
     if not folders:
         raise UserError(str(out), None, "nothing built yet: run twin build")
-    clock = _Clock()
+    clock = _Clock(progress)
     variants: dict[str, list[Path]] = {}
     packages = []
     for d in folders:
@@ -211,6 +220,7 @@ def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
         else:
             packages.append(d)
 
+    clock.expect(len(packages) + sum(map(len, variants.values())))  # package checks
     assets, sdf, usd, glb, dae = [], [], [], [], []
     for d in packages:
         manifest = _read_json(d / "manifest.json") or {}
@@ -242,6 +252,9 @@ def build_report(sources: Path, out: Path) -> tuple[dict, dict]:
     site, scene_files = _scene_files(out, placements)
     if scene_files["glb"]:
         glb.append(scene_files["glb"])
+    # ign sdf each, the world's, COLLADA each, USD each (the scene's twice), glTF at once, Gazebo
+    scene_usd = 2 if scene_files["usda"] else 0
+    clock.expect(len(sdf) + bool(scene_files["sdf"]) + len(dae) + len(usd) + scene_usd + 1 + 1)
     with ThreadPoolExecutor(max_workers=1) as side:
         # Gazebo's own loaders (processes of their own) beside the format validators
         probe = side.submit(clock.run, "gazebo probe", _gazebo, models, scene_files["sdf"], packages, variants)
@@ -468,10 +481,10 @@ def to_html(report: dict) -> bytes:
     return "".join(parts).encode()
 
 
-def validate_build(sources: Path, out: Path) -> dict:
+def validate_build(sources: Path, out: Path, progress=None) -> dict:
     """Write out/reports/{validation.json,validation.html,junit.xml,timings.json};
-    return {"errors": n, "warnings": n, "skipped": n}."""
-    report, timings = build_report(Path(sources), Path(out))
+    return {"errors": n, "warnings": n, "skipped": n}. `progress`: build_report's."""
+    report, timings = build_report(Path(sources), Path(out), progress)
     reports = Path(out) / "reports"
     reports.mkdir(parents=True, exist_ok=True)
     atomic_write(reports / "validation.json", to_json(report))

@@ -58,7 +58,7 @@ from .arrays import build_mesh, rigid_inverse, split_rigid
 from .bindings import merge_bindings
 from .links import assign_mass
 from .not_carried import animation_warning, newer_file_warning, rest_armatures
-from .safe_open import header_version, mute_python_drivers, open_untrusted
+from .safe_open import header_version, mute_python_drivers, open_untrusted, untrusted_code_warning
 from .scene import Scene, driven_objects, scene_metadata
 from .walk import read_scene, unit_metres
 
@@ -104,6 +104,7 @@ def read_blend_path(
     scene = Scene(driven=driven_objects(bindings))
     scene.warnings.update(newer_file_warning())
     muted = mute_python_drivers()
+    scene.warnings.update(untrusted_code_warning(path, muted))
     scene.warnings.update(rest_armatures())
     scene.warnings.update(animation_warning())
     read_scene(path, scene)

@@ -19,22 +19,28 @@ import sys
 from pathlib import Path
 
 from ...errors import UserError
+from .not_carried import _listed
 
 
 @contextlib.contextmanager
-def _quiet_stdout():
-    """Blender's C logger prints 'Read blend: ...' on file descriptor 1 for every open;
-    builds print progress there. Errors still arrive as exceptions."""
+def _quiet_blender():
+    """Blender's C logger prints 'Read blend: ...' on file descriptor 1 for every open,
+    and the driver evaluation of the load tells stderr to "enable auto-execution" for
+    each Python driver it refused: the reader says what was not run in its own words
+    (untrusted_code_warning), and errors still arrive as exceptions."""
     sys.stdout.flush()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
         os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
         yield
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-        os.close(devnull)
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, devnull):
+            os.close(fd)
 
 
 def open_untrusted(path: Path) -> None:
@@ -50,7 +56,7 @@ def open_untrusted(path: Path) -> None:
     # expression beyond its math-only whitelist (mute_python_drivers mutes those too).
     bpy.context.preferences.filepaths.use_scripts_auto_execute = False
     try:
-        with _quiet_stdout():
+        with _quiet_blender():
             bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
     except RuntimeError as e:
         reason = str(e).strip().splitlines()[0] if str(e).strip() else "unreadable"
@@ -108,3 +114,23 @@ def mute_python_drivers() -> list[str]:
     if muted:
         bpy.context.evaluated_depsgraph_get().update()
     return sorted(muted)
+
+
+def untrusted_code_warning(path: Path, muted: list[str]) -> dict[str, str]:
+    """One warning naming the file, when it holds Python that was not run: the
+    drivers mute_python_drivers muted and the text blocks registered to run on load."""
+    import bpy
+
+    texts = sorted(t.name for t in bpy.data.texts if t.use_module)
+    if not muted and not texts:
+        return {}
+    what = []
+    if muted:
+        what.append(f"{len(muted)} Python driver{'s' if len(muted) > 1 else ''} ({_listed(muted)})")
+    if texts:
+        what.append(f"{len(texts)} script{'s' if len(texts) > 1 else ''} set to run on load ({_listed(texts)})")
+    was = "was" if len(muted) + len(texts) == 1 else "were"
+    return {"scripts": f"{path.name}: its {' and '.join(what)} {was} not run: code inside a source file is "
+                       "untrusted input, so the build never runs it; driven properties keep the values saved "
+                       "in the file"}
+
