@@ -58,7 +58,8 @@ class FileHasher:
 class Task:
     """One unit of work.
 
-    inputs:  source files read (absolute paths); their content hashes enter the key.
+    inputs:  source files read (absolute paths); their content hashes enter the key,
+             each named by input_name.
     deps:    names of tasks whose outputs this task reads (the digests of what they
              made enter this key).
     params:  JSON-serialisable parameters; enter the key as sorted JSON.
@@ -92,9 +93,11 @@ class Task:
     key: str = ""
     input_hashes: dict[str, str] = field(default_factory=dict)
 
-    def compute_key(self, hasher: FileHasher, dep_digests: dict[str, str], root: Path) -> str:
-        """`dep_digests`: output_digest of each dependency, as made or restored."""
-        self.input_hashes = {_rel(p, root): hasher(p) for p in self.inputs}
+    def compute_key(self, hasher: FileHasher, dep_digests: dict[str, str], root: Path,
+                    roots: dict[str, Path] | None = None) -> str:
+        """`dep_digests`: output_digest of each dependency, as made or restored;
+        `roots`: folders inputs are named under (input_name), else relative to `root`."""
+        self.input_hashes = {input_name(p, root, roots): hasher(p) for p in self.inputs}
         material = {
             "name": self.name,
             "inputs": self.input_hashes,
@@ -106,7 +109,19 @@ class Task:
         return self.key
 
 
-def _rel(path: Path, root: Path) -> str:
+def input_name(path: Path, root: Path, roots: dict[str, Path] | None = None) -> str:
+    """An input's name in a key: `<label>/<path inside it>` under the first of `roots`
+    (label -> folder) that holds it, so a key does not change when those folders move
+    (a CI runner that checks the sources out elsewhere shares the cache); else its
+    path relative to `root` (the build folder)."""
+    # as spelled first (a symlinked tools/node_modules is inside the code's folder),
+    # then with links resolved
+    for spelling in (lambda q: Path(os.path.abspath(q)), lambda q: Path(q).resolve()):
+        for label, folder in (roots or {}).items():
+            try:
+                return f"<{label}>/{spelling(path).relative_to(spelling(folder)).as_posix()}"
+            except ValueError:
+                continue
     try:
         return os.path.relpath(Path(path).resolve(), root.resolve())
     except ValueError:

@@ -84,8 +84,11 @@ class BuildLock:
 class Scheduler:
     def __init__(self, build: Path, cache: Path | None = None, jobs: int | None = None, progress=None,
                  executor: ExecutorFactory = local_pool, cache_limit: int | None = DEFAULT_LIMIT,
-                 memory_limit: int | str | None = None):
+                 memory_limit: int | str | None = None, roots: dict[str, Path] | None = None):
         self.build = Path(build)
+        # folders the tasks' inputs are named under in their keys (graph.input_name):
+        # moving one of them changes no key
+        self.roots = dict(roots or {})
         self.executor = executor
         self.cache = Cache(cache_root(self.build, cache))
         self.cache_limit = cache_limit  # bytes kept after a build that stored something (None: all)
@@ -147,7 +150,7 @@ class Scheduler:
                 stale.append(t)
                 names.add(t.name)
                 continue
-            key = t.compute_key(hasher, digests, self.build)
+            key = t.compute_key(hasher, digests, self.build, self.roots)
             previous = state["tasks"].get(t.name)
             if self._fresh(previous, key):
                 digests[t.name] = previous["digest"]
@@ -207,7 +210,7 @@ class Scheduler:
                             self._block(report, broken, task, missing)
                             done.add(name)
                             continue
-                        task.compute_key(hasher, digests, self.build)
+                        task.compute_key(hasher, digests, self.build, self.roots)
                         previous = state["tasks"].get(name)
                         if self._fresh(previous, task.key):
                             self.cache.used(task.key)

@@ -50,7 +50,7 @@ from pathlib import Path
 from .. import config, ir
 from ..errors import UserError
 from ..files import atomic_write
-from .code import code_of
+from .code import ROOT as CODE_ROOT, code_of
 from .geometry_task import WARM as GEOMETRY_WARM, build_geometry
 from .graph import Task
 from .layout import IR_FOLDER, SOURCE_FOLDER
@@ -96,6 +96,9 @@ class Plan:
     unused: list[str]
     problems: list[UserError] = field(default_factory=list)
     tasks: list[Task] = field(default_factory=list)
+    # the folders the tasks' inputs are named under in their keys (graph.input_name):
+    # the sources, and the code's (the viewer's static files, the installed libraries)
+    roots: dict[str, Path] = field(default_factory=dict)
 
 
 def scenario_assets(sources: Path) -> set[str]:
@@ -165,6 +168,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
     from .cache import cache_root
 
     p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME)
+    p.roots = {"sources": Path(sources).absolute(), "code": CODE_ROOT}
     broken = {asset_of(e): e for e in p.problems}
     wanted = sorted(set(p.used) - set(broken))
     if only:
@@ -240,8 +244,11 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     sources, build = Path(sources).resolve(), Path(build).resolve()
     args = {"sources": str(sources), "build": str(build)}
     inputs = (site.path.resolve(), (site.root / site.floorplan).resolve())
-    terrain = Task(name="terrain", stage="terrain", action=build_terrain, args=args, inputs=inputs,
-                   params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
+    # the terrain is made from its parameters alone: moving an INSERT or editing an
+    # inspection point leaves it up to date
+    settings = terrain_settings(site, p.floorplan.platforms)
+    terrain = Task(name="terrain", stage="terrain", action=build_terrain, args={"settings": settings},
+                   params={"terrain": tname, "settings": settings}, code=code, outputs=(f"models/{tname}/",))
     placed_assets = sorted({pl.asset_id for pl in p.floorplan.placements})
     packages = tuple(f"asset:{a}" for a in placed_assets)
     # a placed asset that fails in this build is placed from its last package, so one
@@ -251,6 +258,20 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
                  deps=("terrain", *packages), params={"site": site.name}, code=code, outputs=("scene/",),
                  warm=SCENE_WARM, previous_ok=packages)
     return [terrain, scene]
+
+
+def terrain_settings(site: config.Site, platforms) -> dict:
+    """What the terrain is made of, as plain data (its task's key and arguments): the
+    platform outlines, the levels, the [terrain] settings, the georeferencing and the
+    [origin] (without one, the platforms' centre is the origin), the site's name."""
+    return {
+        "name": site.name, "floorplan": site.floorplan, "crs": site.crs, "grid_origin": list(site.grid_origin),
+        "grid_rotation_deg": site.grid_rotation_deg, "grid_scale": site.grid_scale,
+        "origin": None if site.origin is None else list(site.origin),
+        "levels": [[lv.name, lv.elevation] for lv in site.levels],
+        "slope_ratio": site.slope_ratio, "natural_ground": site.natural_ground, "skirt_width": site.skirt_width,
+        "platforms": [[pf.level, [[float(x), float(y)] for x, y in pf.outline], pf.handle] for pf in platforms],
+    }
 
 
 def viewer_tasks(site: config.Site, sources: Path, build: Path, placed_assets: list[str], memo: str) -> list[Task]:

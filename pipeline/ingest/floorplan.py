@@ -440,19 +440,20 @@ def read_floorplan_memo(path: Path, assets: set[str], levels: set[str], memo: Pa
     from ..files import atomic_write
 
     # one spelling of the path: the planner is handed a relative sources folder and the
-    # scene tasks an absolute one, and each would otherwise miss the other's entry
+    # scene tasks an absolute one. It is not in the key (the same drawing in a moved
+    # sources folder reads the same); a remembered reading gets the path of this one.
     path = Path(path).resolve()
     key = None
     if memo is not None and path.is_file():
         h = hashlib.sha256(path.read_bytes())
-        h.update(json.dumps([sorted(assets), sorted(levels), str(path), options and asdict(options)]).encode())
+        h.update(json.dumps([sorted(assets), sorted(levels), options and asdict(options)]).encode())
         for module in (Path(__file__), Path(ir.__file__)):  # the reader's code
             h.update(module.read_bytes())
         key = h.hexdigest()
         try:
             doc = json.loads(memo.read_text())
             if doc.get("key") == key:
-                return _floorplan_from_json(doc["floorplan"])
+                return _floorplan_from_json({**doc["floorplan"], "path": str(path)})
         except (OSError, ValueError, KeyError, TypeError):
             pass
     fp = read_floorplan(path, known_assets=assets, levels=levels, options=options)
