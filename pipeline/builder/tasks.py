@@ -47,7 +47,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import config, ir
+from .. import config, ir, site_frame
 from ..errors import UserError
 from ..files import atomic_write
 from .code import ROOT as CODE_ROOT, code_of
@@ -124,11 +124,13 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
     passed = config.PassedChecks(before)
     site = config.load_site(sources / "site.toml", passed)
     assets, problems = config.load_assets(sources, passed)
-    if checked is not None and not problems and passed.met != before:
-        _write_passed(checked, passed.met)
     known = config.asset_ids(sources)
     plan_path = site.root / site.floorplan
     fp = read_floorplan_memo(plan_path, known, set(site.level_names), memo, site.floorplan_options)
+    # the plan on the globe at [origin], the time zone at its longitude: before any task
+    site_frame.check(site, fp, passed)
+    if checked is not None and not problems and passed.met != before:
+        _write_passed(checked, passed.met)
     placed = {p.asset_id for p in fp.placements}
     used = sorted(placed | (scenario_assets(sources) & known))
     unused = sorted(known - set(used))
