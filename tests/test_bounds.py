@@ -71,3 +71,51 @@ def test_the_placement_bound_is_a_site_toml_key(tmp_path):
                                                                             max_placements=1000))
     assert not problems and len(fp.placements) == 1000
     assert len({p.tag for p in fp.placements}) == 1000
+
+
+# --- datasets ------------------------------------------------------------------------------
+
+
+def test_a_billion_frames_is_refused_before_anything_is_planned(tmp_path):
+    from pipeline.runtime.render import dataset_config
+    from test_dataset import TINY
+
+    config = tmp_path / "huge.toml"
+    config.write_text(TINY.replace("count = 4", "count = 1000000000"))
+    with pytest.raises(UserError) as e:
+        dataset_config.load(config)
+    assert e.value.obj == "dataset.count"
+    assert "1,000,000,000 frames" in e.value.message and "at most 100,000" in e.value.message
+    t0 = time.perf_counter()
+    proc = twin("dataset", config, "--out", tmp_path / "build", timeout=60)
+    assert time.perf_counter() - t0 < 30
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert "dataset.count" in proc.stderr and "100,000" in proc.stderr
+    config.write_text(TINY.replace("count = 4", "count = 100000"))
+    assert dataset_config.load(config).count == 100_000  # the bound itself is a dataset
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_run_plans_only_the_frames_it_renders(sample_build, tmp_path):
+    """--frames 1 of a long config plans one frame: the scene its worker loads is what
+    frame 0 sees, not what the config's 2,000 frames see."""
+    import json
+
+    from pipeline.runtime.render.dataset_plan import Planner
+    from pipeline.runtime.render.site import load_site
+    from test_dataset import TINY, _scene_copy
+
+    config = tmp_path / "long.toml"
+    config.write_text(TINY.replace("count = 4", "count = 2000"))
+    out = _scene_copy(sample_build, tmp_path / "build")
+    proc = twin("dataset", config, "--out", out, "--frames", "1", timeout=1800)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    timings = json.loads((out / "datasets" / "tiny" / "timings.json").read_text())
+    from pipeline.runtime.render import dataset_config
+
+    planner = Planner(dataset_config.load(config), load_site(out, ROOT / "sources"), ROOT / "sources")
+    first = set(planner.plan(0).visible_tags)
+    assert timings["frames"] == 1 and timings["scene_placements"] == len(first)
+    assert len(first | set(planner.plan(1).visible_tags) | set(planner.plan(2).visible_tags)) > len(first)
+    assert timings["plan_s"] < 10.0
