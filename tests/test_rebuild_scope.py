@@ -17,6 +17,7 @@ def test_a_moved_sources_folder_reruns_nothing(tmp_path):
     out, cache = tmp_path / "build", tmp_path / "cache"
     explain(first, out, "--cache", cache)
     made = tree_hashes(out)
+    between = _intermediates(out)
 
     # the same bytes in another folder, at another depth, the first one gone
     moved = tmp_path / "elsewhere" / "deeper" / "site-sources"
@@ -33,6 +34,18 @@ def test_a_moved_sources_folder_reruns_nothing(tmp_path):
     assert ran(ci) == set()
     assert {e["reason"] for e in ci.values()} == {"restored from cache"}
     assert tree_hashes(tmp_path / "runner" / "out") == made
+
+    # made again from the moved folder, without the cache: the same bytes, the files the
+    # tasks hand on too (a source read again there cuts off, it does not rerun the chain)
+    explain(moved, tmp_path / "fresh")
+    assert tree_hashes(tmp_path / "fresh") == made
+    assert _intermediates(tmp_path / "fresh") == between
+
+
+def _intermediates(out) -> dict[str, bytes]:
+    """What the source and geometry tasks hand on (.source/, .ir/)."""
+    return {str(p.relative_to(out)): p.read_bytes() for folder in (".source", ".ir")
+            for p in sorted((out / folder).rglob("*")) if p.is_file()}
 
 
 def _edit_plan(path, edit) -> None:
