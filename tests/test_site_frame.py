@@ -53,6 +53,9 @@ def test_a_crs_of_the_other_side_of_the_world_is_an_error_naming_it(built, tmp_p
     assert tree_hashes(out) == before  # nothing was built on it
     info = twin("info", "--sources", src)
     assert info.returncode == 1 and "plan.crs" in info.stderr and "EPSG:32650" in info.stderr
+    # an asset's package does not stand on the site's frame: --only builds it
+    only = twin("build", "--sources", src, "--out", tmp_path / "only", "--only", "kiosk")
+    assert only.returncode == 0, only.stderr[-2000:]
 
 
 def test_without_origin_the_wrong_crs_contradicts_the_time_zone(tmp_path):

@@ -113,10 +113,11 @@ def scenario_assets(sources: Path) -> set[str]:
 CHECKS_NAME = ".checked.json"  # in a build folder: config checks that passed (config.py)
 
 
-def load_sources(sources: Path, memo: Path | None = None, checked: Path | None = None) -> Plan:
+def load_sources(sources: Path, memo: Path | None = None, checked: Path | None = None, scene: bool = True) -> Plan:
     """What the sources hold. `memo`: a file where the floor plan read last time is
     kept with its key, so that a no-op build does not parse the DXF again; `checked`:
-    a file of the config checks that passed, so that it does not check them again."""
+    a file of the config checks that passed, so that it does not check them again;
+    `scene`: whether the scene is built (its frame is checked: site_frame)."""
     from ..ingest.floorplan import read_floorplan_memo
 
     sources = Path(sources)
@@ -127,8 +128,8 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
     known = config.asset_ids(sources)
     plan_path = site.root / site.floorplan
     fp = read_floorplan_memo(plan_path, known, set(site.level_names), memo, site.floorplan_options)
-    # the plan on the globe at [origin], the time zone at its longitude: before any task
-    site_frame.check(site, fp, passed)
+    if scene:  # the plan on the globe at [origin], the time zone at its longitude: before any task
+        site_frame.check(site, fp, passed)
     if checked is not None and not problems and passed.met != before:
         _write_passed(checked, passed.met)
     placed = {p.asset_id for p in fp.placements}
@@ -169,7 +170,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
     from ..ingest.floorplan import MEMO_NAME, require_placements_and_platforms
     from .cache import cache_root
 
-    p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME)
+    p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME, scene=not only)
     p.roots = {"sources": Path(sources).absolute(), "code": CODE_ROOT}
     broken = {asset_of(e): e for e in p.problems}
     wanted = sorted(set(p.used) - set(broken))
