@@ -4,6 +4,7 @@ placements of the floor plan change (its key is what it is made of)."""
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import ezdxf
@@ -28,6 +29,8 @@ def test_a_moved_sources_folder_reruns_nothing(tmp_path):
     assert {e["reason"] for e in again.values()} == {"up to date"}
     assert all(e["changed"] == [] for e in again.values())
     assert tree_hashes(out) == made
+    hashed = json.loads((out / ".state.json").read_text())["hashes"]
+    assert hashed and not [p for p in hashed if str(first) in p]  # the old folder's files are forgotten
 
     # a CI runner: another checkout, another build folder, the cache shared
     ci = explain(moved, tmp_path / "runner" / "out", "--cache", cache)

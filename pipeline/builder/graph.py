@@ -41,11 +41,18 @@ class FileHasher:
 
     def __init__(self, memo: dict[str, list] | None = None):
         self.memo: dict[str, list] = dict(memo or {})
+        self.seen: set[str] = set()  # the paths hashed in this build
+
+    def kept(self) -> dict[str, list]:
+        """The memo of the files this build hashed: a moved or deleted file's entry
+        goes, so the state file does not grow with every folder the sources were in."""
+        return {k: v for k, v in sorted(self.memo.items()) if k in self.seen}
 
     def __call__(self, path: Path) -> str:
         path = Path(path)
         st = path.stat()
         key = str(path.resolve())
+        self.seen.add(key)
         seen = self.memo.get(key)
         if seen and seen[0] == st.st_size and seen[1] == st.st_mtime_ns:
             return seen[2]

@@ -299,7 +299,7 @@ class Scheduler:
                         meta = self._place(task, task.key)
                         self._finish(state, task, digests, meta, report)
                         done.add(task.name)
-                        state["hashes"] = hasher.memo
+                        state["hashes"] = hasher.kept()
                         self._save_state(state)
                     if lost:
                         pool.shutdown(wait=True, cancel_futures=True)
@@ -309,7 +309,7 @@ class Scheduler:
             finally:
                 if pool is not None:
                     pool.shutdown(wait=True, cancel_futures=True)
-                state["hashes"] = hasher.memo
+                state["hashes"] = hasher.kept()
                 self._save_state(state)
                 shutil.rmtree(self.build / ".staging", ignore_errors=True)
             if remade and self.cache_limit is not None:
