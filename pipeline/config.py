@@ -143,6 +143,7 @@ class FloorplanOptions:
     insert_scale: str = "ignore"
     units: str | None = None
     grid_scale: float = 1.0
+    max_placements: int = 100_000  # more from the drawing's INSERTs is refused before expanding them
 
 
 @dataclass(frozen=True)
@@ -305,6 +306,7 @@ def _floorplan_options(data: dict, path: Path) -> FloorplanOptions:
         insert_scale=fp["insert_scale"],
         units=data["plan"].get("units"),
         grid_scale=float(data["plan"]["grid_scale"]),
+        max_placements=int(fp["max_placements"]),
     )
 
 

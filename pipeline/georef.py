@@ -95,6 +95,15 @@ def _to_wgs84(site) -> Transformer:
     return Transformer.from_crs(_crs3d(site), CRS.from_user_input(WGS84_3D), always_xy=True)
 
 
+def plan_to_llh(site, xy, h) -> np.ndarray:
+    """xy: (n, 2) plan metres, h: (n,) or scalar ellipsoidal heights -> (n, 3) WGS84 lat,
+    lon (deg), height, through the site's CRS (no scene origin needed)."""
+    p = _xy(xy)
+    en = plan_to_crs(p, site)
+    lon, lat, hw = _transform(_to_wgs84(site), en[:, 0], en[:, 1], _per_point(h, len(p)))
+    return np.stack([lat, lon, hw], axis=1)
+
+
 def default_origin(site, platforms: Sequence[ir.Platform]) -> tuple[float, float, float]:
     """The scene origin when site.toml has no [origin]: the centre of the platforms'
     bounding box in the plan, as WGS84 (lat, lon) degrees, and height = the lowest

@@ -88,6 +88,12 @@ def gather(sources: Path, build: Path = Path("build"), progress=None) -> InfoRep
         require_placements_and_platforms(fp)
     except UserError as e:
         r.problems.append(str(e))
+    from . import site_frame
+
+    try:
+        site_frame.check(site, fp)
+    except UserError as e:
+        r.problems.append(str(e))
     r.per_level = dict(sorted(Counter(p.level for p in fp.placements).items()))
     r.per_asset = dict(sorted(Counter(p.asset_id for p in fp.placements).items()))
     from .builder.tasks import scenario_assets

@@ -61,7 +61,11 @@ def test_articulated_processed_asset_round_trips(tmp_path):
     assert asset.joints and any(link.collisions for link in asset.links)
     path = tmp_path / "a.ir"
     irfile.write(path, asset)
-    back, _ = irfile.read(path)
+    # the file names the source by file name (the same bytes wherever the sources sit);
+    # the reader is handed its path
+    assert str(cfg.source.parent).encode() not in path.read_bytes()
+    assert irfile.read(path)[0].source == cfg.source.name
+    back, _ = irfile.read(path, cfg.source)
     _same(asset, back)
 
 

@@ -49,7 +49,7 @@ def build_geometry(staging: Path, asset_toml: str, build: str, memo: str | None 
     from ..engine.memo import ArrayMemo
 
     cfg = config.load_asset_config(Path(asset_toml))
-    asset, extra = irfile.read(Path(build) / source_path(cfg.id))
+    asset, extra = irfile.read(Path(build) / source_path(cfg.id), cfg.source)
     timings = {}
     levels = None if memo is None else ArrayMemo(Path(memo), memo_namespace)
     checked = None if memo is None else ArrayMemo(Path(memo), checks_namespace)

@@ -49,17 +49,26 @@ def dumps(asset: ir.Asset, extra: dict | None = None) -> bytes:
 
 
 def write(path: Path, asset: ir.Asset, extra: dict | None = None) -> None:
+    """The asset's source is kept by its file name: the file is then the same bytes
+    wherever the sources sit (a moved sources folder is a cut-off, not a rebuild), and
+    a reader puts the path back (`read`'s `source`)."""
+    if asset.source:
+        asset = dataclasses.replace(asset, source=Path(asset.source).name)
     Path(path).write_bytes(dumps(asset, extra))
 
 
-def read(path: Path) -> tuple[ir.Asset, dict]:
-    """(asset, extra) from a file `write` made; a damaged file is a UserError."""
+def read(path: Path, source: Path | None = None) -> tuple[ir.Asset, dict]:
+    """(asset, extra) from a file `write` made; a damaged file is a UserError.
+    `source`: the asset's source file as it is now (what its errors name)."""
     path = Path(path)
     data = path.read_bytes()
     try:
-        return loads(data)
+        asset, extra = loads(data)
     except (ValueError, KeyError, TypeError, struct.error) as e:
         raise UserError(path, None, f"not a readable asset file ({e})") from None
+    if source is not None:
+        asset = dataclasses.replace(asset, source=str(source))
+    return asset, extra
 
 
 def loads(data: bytes) -> tuple[ir.Asset, dict]:

@@ -23,7 +23,7 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
     out.mkdir(parents=True, exist_ok=True)
     if quiet:  # nothing to show: rich is not even imported (a quarter of a no-op's imports)
         return Scheduler(out, cache=cache, jobs=jobs, executor=executor, cache_limit=cache_limit,
-                         memory_limit=memory_limit).run(p.tasks)
+                         memory_limit=memory_limit, roots=p.roots).run(p.tasks)
     from rich.console import Console
     from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                TimeRemainingColumn)
@@ -34,7 +34,8 @@ def build(sources: Path, out: Path, *, jobs: int | None = None, only: list[str] 
                   TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False) as progress:
         bars = {s: progress.add_task(s, total=sum(t.stage == s for t in p.tasks)) for s in stages}
         scheduler = Scheduler(out, cache=cache, jobs=jobs, progress=lambda t: progress.advance(bars[t.stage]),
-                              executor=executor, cache_limit=cache_limit, memory_limit=memory_limit)
+                              executor=executor, cache_limit=cache_limit, memory_limit=memory_limit,
+                              roots=p.roots)
         report = scheduler.run(p.tasks)
     if report.cache.get("removed"):
         console.print(f"cache: dropped {report.cache['removed']} least recently used entries "

@@ -11,11 +11,11 @@ WARM = ("pipeline.scene.assemble", "pipeline.scene.scene_gltf", "pipeline.scene.
         "pipeline.ingest.floorplan", "pyproj", "astral", "pxr.Usd", "pxr.Sdf", "pxr.Gf")
 
 
-def build_terrain(staging: Path, sources: str, build: str) -> dict:
-    """Task action: the terrain package."""
+def build_terrain(staging: Path, settings: dict) -> dict:
+    """Task action: the terrain package, from what its key holds (tasks.terrain_settings)."""
     from ..scene.assemble import build_terrain as action
 
-    return action(staging=staging, sources=sources, build=build)
+    return action(staging=staging, settings=settings)
 
 
 def build_scene(staging: Path, sources: str, build: str) -> dict:

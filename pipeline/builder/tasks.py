@@ -49,10 +49,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .. import config, ir
+from .. import config, ir, site_frame
 from ..errors import UserError
 from ..files import atomic_write
-from ..engine.code import code_of
+from ..engine.code import ROOT as CODE_ROOT, code_of
 from .geometry_task import WARM as GEOMETRY_WARM, build_geometry
 from ..engine.graph import Task
 from .layout import IR_FOLDER, SOURCE_FOLDER
@@ -98,6 +98,9 @@ class Plan:
     unused: list[str]
     problems: list[UserError] = field(default_factory=list)
     tasks: list[Task] = field(default_factory=list)
+    # the folders the tasks' inputs are named under in their keys (graph.input_name):
+    # the sources, and the code's (the viewer's static files, the installed libraries)
+    roots: dict[str, Path] = field(default_factory=dict)
 
 
 def scenario_assets(sources: Path) -> set[str]:
@@ -112,10 +115,11 @@ def scenario_assets(sources: Path) -> set[str]:
 CHECKS_NAME = ".checked.json"  # in a build folder: config checks that passed (config.py)
 
 
-def load_sources(sources: Path, memo: Path | None = None, checked: Path | None = None) -> Plan:
+def load_sources(sources: Path, memo: Path | None = None, checked: Path | None = None, scene: bool = True) -> Plan:
     """What the sources hold. `memo`: a file where the floor plan read last time is
     kept with its key, so that a no-op build does not parse the DXF again; `checked`:
-    a file of the config checks that passed, so that it does not check them again."""
+    a file of the config checks that passed, so that it does not check them again;
+    `scene`: whether the scene is built (its frame is checked: site_frame)."""
     from ..ingest.floorplan import read_floorplan_memo
 
     sources = Path(sources)
@@ -123,11 +127,13 @@ def load_sources(sources: Path, memo: Path | None = None, checked: Path | None =
     passed = config.PassedChecks(before)
     site = config.load_site(sources / "site.toml", passed)
     assets, problems = config.load_assets(sources, passed)
-    if checked is not None and not problems and passed.met != before:
-        _write_passed(checked, passed.met)
     known = config.asset_ids(sources)
     plan_path = site.root / site.floorplan
     fp = read_floorplan_memo(plan_path, known, set(site.level_names), memo, site.floorplan_options)
+    if scene:  # the plan on the globe at [origin], the time zone at its longitude: before any task
+        site_frame.check(site, fp, passed)
+    if checked is not None and not problems and passed.met != before:
+        _write_passed(checked, passed.met)
     placed = {p.asset_id for p in fp.placements}
     used = sorted(placed | (scenario_assets(sources) & known))
     unused = sorted(known - set(used))
@@ -166,7 +172,8 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
     from ..ingest.floorplan import MEMO_NAME, require_placements_and_platforms
     from ..engine.cache import cache_root
 
-    p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME)
+    p = load_sources(sources, memo=Path(build) / MEMO_NAME, checked=Path(build) / CHECKS_NAME, scene=not only)
+    p.roots = {"sources": Path(sources).absolute(), "code": CODE_ROOT}
     broken = {asset_of(e): e for e in p.problems}
     wanted = sorted(set(p.used) - set(broken))
     if only:
@@ -243,8 +250,11 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     sources, build = Path(sources).resolve(), Path(build).resolve()
     args = {"sources": str(sources), "build": str(build)}
     inputs = (site.path.resolve(), (site.root / site.floorplan).resolve())
-    terrain = Task(name="terrain", stage="terrain", action=build_terrain, args=args, inputs=inputs,
-                   params={"terrain": tname}, code=code, outputs=(f"models/{tname}/",))
+    # the terrain is made from its parameters alone: moving an INSERT or editing an
+    # inspection point leaves it up to date
+    settings = terrain_settings(site, p.floorplan.platforms)
+    terrain = Task(name="terrain", stage="terrain", action=build_terrain, args={"settings": settings},
+                   params={"terrain": tname, "settings": settings}, code=code, outputs=(f"models/{tname}/",))
     placed_assets = sorted({pl.asset_id for pl in p.floorplan.placements})
     packages = tuple(f"asset:{a}" for a in placed_assets)
     # a placed asset that fails in this build is placed from its last package, so one
@@ -254,6 +264,20 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
                  deps=("terrain", *packages), params={"site": site.name}, code=code, outputs=("scene/",),
                  warm=SCENE_WARM, previous_ok=packages)
     return [terrain, scene]
+
+
+def terrain_settings(site: config.Site, platforms) -> dict:
+    """What the terrain is made of, as plain data (its task's key and arguments): the
+    platform outlines, the levels, the [terrain] settings, the georeferencing and the
+    [origin] (without one, the platforms' centre is the origin), the site's name."""
+    return {
+        "name": site.name, "floorplan": site.floorplan, "crs": site.crs, "grid_origin": list(site.grid_origin),
+        "grid_rotation_deg": site.grid_rotation_deg, "grid_scale": site.grid_scale,
+        "origin": None if site.origin is None else list(site.origin),
+        "levels": [[lv.name, lv.elevation] for lv in site.levels],
+        "slope_ratio": site.slope_ratio, "natural_ground": site.natural_ground, "skirt_width": site.skirt_width,
+        "platforms": [[pf.level, [[float(x), float(y)] for x, y in pf.outline], pf.handle] for pf in platforms],
+    }
 
 
 def viewer_tasks(site: config.Site, sources: Path, build: Path, placed_assets: list[str], memo: str) -> list[Task]:

@@ -23,6 +23,11 @@ from ..errors import UserError
 from ..runtime import camera as camera_model
 
 NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+# frames a dataset may hold: a run plans its frames before the first render (the scene
+# a worker loads is what they see), 17 ms each on the sample (culling, mostly), and
+# renders one in 5 to 30 s: a hundred thousand is half an hour of planning ahead of
+# weeks of rendering; a billion would be 200 days of planning before anything shows
+MAX_COUNT = 100_000
 KINDS = ("inspection_point", "route", "ptz")
 
 
@@ -102,11 +107,20 @@ def load(path: str | Path) -> DatasetConfig:
         raise UserError(path, "cameras", "at least one [[cameras]] table")
     return DatasetConfig(
         path=path, name=name, seed=r.integer(head, "dataset.seed"),
-        count=r.integer(head, "dataset.count", lo=1),
+        count=_count(r, head),
         sensor=_sensor(r, data.get("sensor", {})), conditions=_conditions(r, r.table(data, "conditions")),
         states=_states(r, data.get("states", {})),
         cameras=tuple(_camera(r, c, f"cameras[{i}]") for i, c in enumerate(cams)),
         digest=hashlib.sha256(raw).hexdigest())
+
+
+def _count(r: "_Reader", head: dict) -> int:
+    count = r.integer(head, "dataset.count", lo=1)
+    if count > MAX_COUNT:
+        raise UserError(r.path, "dataset.count", f"{count:,} frames: a dataset holds at most {MAX_COUNT:,} (a run "
+                                                 "plans its frames before the first render, and each takes seconds "
+                                                 "to render): split it into datasets of their own, with other seeds")
+    return count
 
 
 def _sensor(r: "_Reader", t: dict) -> Sensor:

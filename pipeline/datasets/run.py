@@ -9,11 +9,14 @@
         dataset.json             config digest, frames, renderer; timings.json: seconds
 
 Frames are independent tasks: frame i is a function of (config, built scene, i) alone
-(dataset_plan.py), rendered in a scene that holds the same placements whichever worker
-renders it (the union of every frame's culled set), showing only its own. So the bytes
-do not depend on the executor, the number of workers or the order, a run of N frames
-is the first N of a longer one, and a killed run resumes by rendering the frames whose
-record is missing (every file is written by rename; the record last).
+(dataset_plan.py), rendered in a scene that holds the meshes the run's frames see (the
+union of their culled sets) and shows only its own, lit by every floodlight of the site
+(not only those of the poles some frame sees). What a frame shows and what lights it
+do not depend on which frames run beside it, so the bytes do not depend on the
+executor, the number of workers or the order, a run of N frames is the first N of a
+longer one, and a killed run resumes by rendering the frames whose record is missing
+(every file is written by rename; the record last). Only the frames asked for are
+planned (--frames N plans N, whatever the config's count).
 """
 
 from __future__ import annotations
@@ -58,7 +61,7 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
     cfg = dataset_config.load(config_path)
     n = cfg.count if frames is None else frames
     if not 1 <= n <= cfg.count:
-        # a worker's scene holds what the config's `count` frames see, no more
+        # the sequence is the config's: frames past its count belong to no dataset
         raise UserError(cfg.path, "--frames", f"{n}: from 1 to the config's count, {cfg.count}")
     out = Path(out)
     sources = Path(sources)
@@ -67,7 +70,7 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
     _claim(folder, cfg)
     planner = Planner(cfg, site, sources)
     t0 = time.perf_counter()
-    union = sorted({t for i in range(cfg.count) for t in planner.plan(i).visible_tags})
+    union = sorted({t for i in range(n) for t in planner.plan(i).visible_tags})
     plan_s = time.perf_counter() - t0
     todo = [i for i in range(n) if not _done(folder, i)]
     log = blender_log(out, cfg.name)
@@ -306,8 +309,9 @@ def _context(job: dict) -> dict:
     scene = CyclesScene(site, cam, cfg.seed)
     scene.load_many(job["union"])
     scene.load_terrain()
-    poles = [t for t in job["union"] if site.placement(t)["asset"] == "lighting_pole"]
-    scene.add_lamps(poles)
+    # every floodlight of the site, whether or not a frame of this run sees its pole:
+    # a frame's light is then the same whichever frames share its worker
+    scene.add_lamps([p["tag"] for p in site.placements if p["asset"] == "lighting_pole"])
     ids = labels.instance_ids(site.placements)
     scene.set_instances(ids)
     cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}

@@ -41,11 +41,18 @@ class FileHasher:
 
     def __init__(self, memo: dict[str, list] | None = None):
         self.memo: dict[str, list] = dict(memo or {})
+        self.seen: set[str] = set()  # the paths hashed in this build
+
+    def kept(self) -> dict[str, list]:
+        """The memo of the files this build hashed: a moved or deleted file's entry
+        goes, so the state file does not grow with every folder the sources were in."""
+        return {k: v for k, v in sorted(self.memo.items()) if k in self.seen}
 
     def __call__(self, path: Path) -> str:
         path = Path(path)
         st = path.stat()
         key = str(path.resolve())
+        self.seen.add(key)
         seen = self.memo.get(key)
         if seen and seen[0] == st.st_size and seen[1] == st.st_mtime_ns:
             return seen[2]
@@ -58,7 +65,8 @@ class FileHasher:
 class Task:
     """One unit of work.
 
-    inputs:  source files read (absolute paths); their content hashes enter the key.
+    inputs:  source files read (absolute paths); their content hashes enter the key,
+             each named by input_name.
     deps:    names of tasks whose outputs this task reads (the digests of what they
              made enter this key).
     params:  JSON-serialisable parameters; enter the key as sorted JSON.
@@ -102,11 +110,12 @@ class Task:
     base_key: str = ""
 
     def compute_key(self, hasher: FileHasher, dep_digests: dict[str, str], root: Path,
-                    opened: dict | None = None) -> str:
+                    roots: dict[str, Path] | None = None, opened: dict | None = None) -> str:
         """`dep_digests`: output_digest of each dependency, as made or restored;
+        `roots`: folders inputs are named under (input_name), else relative to `root`;
         `opened`: the files in `reads_in` the last run opened (their names; the state's
         record of it), hashed now."""
-        self.input_hashes = {_rel(p, root): hasher(p) for p in self.inputs}
+        self.input_hashes = {input_name(p, root, roots): hasher(p) for p in self.inputs}
         self.opened = {rel: _hash_or_none(hasher, self.reads_in / rel) for rel in sorted(opened or {})} \
             if self.reads_in is not None else {}
         return self._key(dep_digests)
@@ -141,7 +150,19 @@ def _hash_or_none(hasher: FileHasher, path: Path) -> str | None:
         return None
 
 
-def _rel(path: Path, root: Path) -> str:
+def input_name(path: Path, root: Path, roots: dict[str, Path] | None = None) -> str:
+    """An input's name in a key: `<label>/<path inside it>` under the first of `roots`
+    (label -> folder) that holds it, so a key does not change when those folders move
+    (a CI runner that checks the sources out elsewhere shares the cache); else its
+    path relative to `root` (the build folder)."""
+    # as spelled first (a symlinked tools/node_modules is inside the code's folder),
+    # then with links resolved
+    for spelling in (lambda q: Path(os.path.abspath(q)), lambda q: Path(q).resolve()):
+        for label, folder in (roots or {}).items():
+            try:
+                return f"<{label}>/{spelling(path).relative_to(spelling(folder)).as_posix()}"
+            except ValueError:
+                continue
     try:
         return os.path.relpath(Path(path).resolve(), root.resolve())
     except ValueError:

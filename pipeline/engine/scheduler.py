@@ -85,8 +85,11 @@ class BuildLock:
 class Scheduler:
     def __init__(self, build: Path, cache: Path | None = None, jobs: int | None = None, progress=None,
                  executor: ExecutorFactory = local_pool, cache_limit: int | None = DEFAULT_LIMIT,
-                 memory_limit: int | str | None = None):
+                 memory_limit: int | str | None = None, roots: dict[str, Path] | None = None):
         self.build = Path(build)
+        # folders the tasks' inputs are named under in their keys (graph.input_name):
+        # moving one of them changes no key
+        self.roots = dict(roots or {})
         self.executor = executor
         self.cache = Cache(cache_root(self.build, cache))
         self.cache_limit = cache_limit  # bytes kept after a build that stored something (None: all)
@@ -164,10 +167,10 @@ class Scheduler:
         """The task's key, with the files its last run opened (Task.reads_in): as this
         build folder's state recorded them, else as the cache's last run of it did."""
         if task.reads_in is None or previous is not None:
-            return task.compute_key(hasher, digests, self.build, _opened(previous))
-        base = task.compute_key(hasher, digests, self.build)
+            return task.compute_key(hasher, digests, self.build, self.roots, _opened(previous))
+        base = task.compute_key(hasher, digests, self.build, self.roots)
         names = self.cache.opened_by(base)
-        return task.compute_key(hasher, digests, self.build, dict.fromkeys(names)) if names else base
+        return task.compute_key(hasher, digests, self.build, self.roots, dict.fromkeys(names)) if names else base
 
     def _cpus(self) -> tuple[int, ...]:
         """The CPUs the workers are held to: the first `cores` this process may use
@@ -309,7 +312,7 @@ class Scheduler:
                         meta = self._place(task, task.key)
                         self._finish(state, task, digests, meta, report)
                         done.add(task.name)
-                        state["hashes"] = hasher.memo
+                        state["hashes"] = hasher.kept()
                         self._save_state(state)
                     if lost:
                         pool.shutdown(wait=True, cancel_futures=True)
@@ -319,7 +322,7 @@ class Scheduler:
             finally:
                 if pool is not None:
                     pool.shutdown(wait=True, cancel_futures=True)
-                state["hashes"] = hasher.memo
+                state["hashes"] = hasher.kept()
                 self._save_state(state)
                 shutil.rmtree(self.build / ".staging", ignore_errors=True)
             if remade and self.cache_limit is not None:

@@ -113,6 +113,7 @@ def scan_floorplan(path, known_assets: set[str] | None = None, levels: set[str] 
     ignored: Counter[str] = Counter()
     by_level = {lv.upper(): lv for lv in levels} if levels is not None else None
 
+    _bound_expansion(r, doc)
     for e in doc.modelspace():
         kind = e.dxftype()
         if kind == "INSERT":
@@ -242,6 +243,49 @@ def _visit(r: _Reading, insert, parent, chain: tuple[str, ...], blocks: tuple[st
     for e in insert.block():
         if e.dxftype() == "INSERT":
             _visit(r, e, matrix, chain, (*blocks, block), level)
+
+
+def _bound_expansion(r: _Reading, doc) -> None:
+    """Refuse a drawing whose INSERTs would expand to more placements than [floorplan]
+    max_placements, before expanding any: counted through the block tree (a block's
+    count is the sum over its INSERTs, each one or its own block's count), so ten
+    levels of ten nested INSERTs cost a hundred steps, not the 10^10 visits of
+    expanding them (a 450 KB file that would otherwise grow memory for hours)."""
+    counts: dict[str, int] = {}
+    mapped: dict[str, bool] = {}
+
+    def places(name: str) -> bool:
+        if name not in mapped:
+            mapped[name] = _asset(r, name) is not None
+        return mapped[name]
+
+    def through(block: str) -> int:
+        """Placements that one INSERT of an unmapped `block` expands to."""
+        if block not in counts:
+            counts[block] = 0  # a block that contains itself adds nothing through itself
+            layout = doc.blocks.get(block)
+            inner = Counter(e.dxf.name for e in layout if e.dxftype() == "INSERT") if layout is not None else {}
+            counts[block] = sum(n * (1 if places(name) else through(name))
+                                for name, n in sorted(inner.items()))
+        return counts[block]
+
+    per_block = Counter()
+    for e in doc.modelspace().query("INSERT"):
+        name = e.dxf.name
+        per_block[name] += 1 if places(name) else through(name)
+    limit = r.options.max_placements
+    total = sum(per_block.values())
+    if total <= limit:
+        return
+    block, most = max(per_block.items(), key=lambda kv: (kv[1], kv[0]))
+    where = None if places(block) else f"block {block!r}"
+    what = f"{most:,} INSERTs of block {block!r} in the modelspace" if places(block) else \
+        f"nested INSERTs of block {block!r} expand to {most:,} placements"
+    if most < total:
+        what = f"the drawing expands to {total:,} placements ({what})"
+    raise UserError(r.path, where, f"{what}, more than the {limit:,} that site.toml [floorplan] max_placements "
+                                   "allows (nested blocks multiply their INSERTs: check the block tree, or raise "
+                                   "the limit for a site that has that many)")
 
 
 def _no_asset(r: _Reading, block: str) -> str:
@@ -440,19 +484,20 @@ def read_floorplan_memo(path: Path, assets: set[str], levels: set[str], memo: Pa
     from ..files import atomic_write
 
     # one spelling of the path: the planner is handed a relative sources folder and the
-    # scene tasks an absolute one, and each would otherwise miss the other's entry
+    # scene tasks an absolute one. It is not in the key (the same drawing in a moved
+    # sources folder reads the same); a remembered reading gets the path of this one.
     path = Path(path).resolve()
     key = None
     if memo is not None and path.is_file():
         h = hashlib.sha256(path.read_bytes())
-        h.update(json.dumps([sorted(assets), sorted(levels), str(path), options and asdict(options)]).encode())
+        h.update(json.dumps([sorted(assets), sorted(levels), options and asdict(options)]).encode())
         for module in (Path(__file__), Path(ir.__file__)):  # the reader's code
             h.update(module.read_bytes())
         key = h.hexdigest()
         try:
             doc = json.loads(memo.read_text())
             if doc.get("key") == key:
-                return _floorplan_from_json(doc["floorplan"])
+                return _floorplan_from_json({**doc["floorplan"], "path": str(path)})
         except (OSError, ValueError, KeyError, TypeError):
             pass
     fp = read_floorplan(path, known_assets=assets, levels=levels, options=options)

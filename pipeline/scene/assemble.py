@@ -54,14 +54,36 @@ def scene_sun(site: config.Site, origin_llh) -> dict:
             "time_local": local.isoformat(), "time_utc": when.isoformat()}
 
 
-def build_terrain(staging: Path, sources: str, build: str | None = None) -> dict:
-    """Task action: the terrain package (all formats) into models/<site>_terrain/."""
+def terrain_site(settings: dict) -> config.Site:
+    """The site as the terrain sees it, from its task's parameters (builder.tasks.
+    terrain_settings): what the terrain does not use takes neutral values, so that
+    nothing outside its key can shape it."""
+    origin = settings["origin"]
+    return config.Site(
+        path=Path("site.toml"), name=settings["name"], floorplan=settings["floorplan"], timezone="UTC",
+        crs=settings["crs"], grid_origin=tuple(settings["grid_origin"]),
+        grid_rotation_deg=settings["grid_rotation_deg"], grid_scale=settings["grid_scale"],
+        origin=None if origin is None else tuple(origin),
+        levels=tuple(config.Level(name, elevation) for name, elevation in settings["levels"]),
+        slope_ratio=settings["slope_ratio"], natural_ground=settings["natural_ground"],
+        skirt_width=settings["skirt_width"], screen_tolerance_px=0.0, reference_hfov_rad=0.0,
+        reference_width_px=0, inspection_points=())
+
+
+def build_terrain(staging: Path, settings: dict) -> dict:
+    """Task action: the terrain package (all formats) into models/<site>_terrain/, from
+    the platforms, levels, terrain and georeferencing settings alone (its key)."""
     from ..export import manifest
     from ..export.package import write_package
+    from .. import ir
+    from ..georef import Georeferencer, default_origin
 
-    site, fp, georef = _load(Path(sources), build and Path(build))
+    site = terrain_site(settings)
+    platforms = [ir.Platform(level, np.asarray(outline, dtype=np.float64), handle)
+                 for level, outline, handle in settings["platforms"]]
+    georef = Georeferencer(site, site.origin or default_origin(site, platforms))
     name = config.terrain_model_name(site)
-    asset = terrain_asset(site, list(fp.platforms), georef, name)
+    asset = terrain_asset(site, platforms, georef, name)
     models = Path(staging) / "models"
     models.mkdir(parents=True, exist_ok=True)
     outputs, lod_models, _, _ = write_package(asset, models)
