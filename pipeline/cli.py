@@ -207,6 +207,35 @@ def baseline(dataset_folder: Path, out: Path | None, sources: Path):
 
 
 @main.command()
+@click.argument("scenario", type=click.Path(path_type=Path), required=False)
+@OUT
+@SOURCES
+@click.option("--speed", type=float, default=1.0, show_default=True,
+              help="simulated seconds per real second (the study's accelerated virtual time)")
+@click.option("--start", metavar="ISO-TIME", default=None,
+              help="the clock's first instant (without an offset: the site's wall-clock time; "
+                   "default: the scenario's start, or now)")
+@click.option("--bind", default="127.0.0.1", show_default=True, help="address the sockets listen on")
+@click.option("--port", type=click.IntRange(0, 65533), default=5555, show_default=True,
+              help="the command socket; PUB on PORT+1, the WebSocket and live page on PORT+2 (0: any free ones)")
+@click.option("--sensor", type=click.Path(path_type=Path), default=None,
+              help="a dataset config whose [sensor] renders use and whose PTZ presets the camera knows "
+                   "(default: 640x480, the phone's defaults)")
+@click.option("--record", type=click.Path(path_type=Path), default=None,
+              help="write the run to this MCAP file (Foxglove schemas)")
+@click.option("--no-render", is_flag=True, help="no Blender process: every command but render")
+@user_errors
+def serve(scenario: Path | None, out: Path, sources: Path, speed: float, start: str | None, bind: str, port: int,
+          sensor: Path | None, record: Path | None, no_render: bool):
+    """The live twin: the scenario (default: every bound state settable) on a simulated clock,
+    commands on tcp://BIND:PORT (ZeroMQ, JSON), state published every step, renders on request."""
+    from .live.app import make_server, serve as run_server
+
+    run_server(make_server(out, sources, scenario, speed=speed, start=start, bind=bind, port=port, sensor=sensor,
+                           render=not no_render, record=record))
+
+
+@main.command()
 @OUT
 @click.option("--port", type=click.IntRange(0, 65535), default=8000, show_default=True,
               help="port on 127.0.0.1 (0: any free one)")
