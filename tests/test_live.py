@@ -309,3 +309,107 @@ def test_a_signal_ends_the_twin_with_no_child_left(scene, sig):
         c.close()
         if proc.poll() is None:
             proc.kill()
+
+
+# --- robotics tools: MCAP and Foxglove's live protocol ----------------------------------------
+
+
+def _mcap(path: Path) -> dict[str, list]:
+    from mcap.reader import make_reader
+
+    out: dict[str, list] = {}
+    with open(path, "rb") as fh:
+        for schema, channel, message in make_reader(fh).iter_messages():
+            assert schema.encoding == "jsonschema" and channel.message_encoding == "json"
+            out.setdefault(channel.topic, []).append((schema.name, json.loads(schema.data), message.log_time,
+                                                      json.loads(message.data)))
+    return out
+
+
+def test_serve_records_mcap_and_speaks_foxglove(scene, tmp_path):
+    import asyncio
+    import base64
+
+    import websockets
+
+    build, sources, config = scene
+    rec = tmp_path / "live.mcap"
+    proc, endpoints = start_twin(build, sources, "--sensor", config, "--start", START, "--record", rec)
+    c = Client(endpoints["commands"])
+    try:
+        async def advertised():
+            async with websockets.connect(endpoints["foxglove"], subprotocols=["foxglove.sdk.v1"]) as ws:
+                topics = {}
+                while not {"/tf", "/twin/state", "/camera/image"} <= set(topics):
+                    msg = json.loads(await asyncio.wait_for(ws.recv(), 5))
+                    if msg.get("op") == "advertise":
+                        topics |= {ch["topic"]: ch["schemaName"] for ch in msg["channels"]}
+                return topics
+
+        topics = asyncio.run(advertised())
+        assert topics["/tf"] == "foxglove.FrameTransforms" and topics["/camera/image"] == "foxglove.CompressedImage"
+        c("set", values={"render.reactor_A1.oil_level_tank": 10.0})
+        c("set", values={"render.reactor_A1.oil_level_tank": 90.0})
+        assert c("render")["ok"]
+        png = c.frames[0]
+        assert c("shutdown")["ok"] and proc.wait(30) == 0
+    finally:
+        c.close()
+        if proc.poll() is None:
+            proc.kill()
+    got = _mcap(rec)
+    assert set(got) == {"/tf", "/twin/state", "/camera/image"}
+    states = [m for *_, m in got["/twin/state"]]
+    for m in states:
+        protocol.check("published", m)
+    assert [m["seq"] for m in states] == sorted(m["seq"] for m in states)
+    levels = [m["values"]["render.reactor_A1.oil_level_tank"] for m in states
+              if "render.reactor_A1.oil_level_tank" in m["values"]]
+    assert levels[-2:] == [10.0, 90.0]
+    # the pointer's transform follows the level: two different rotations of R-1's pointer
+    pointer = [m for *_, tf in got["/tf"] for m in tf["transforms"] if m["child_frame_id"] == "R-1/body/pointer"]
+    assert len({json.dumps(p["rotation"], sort_keys=True) for p in pointer}) >= 2
+    first = got["/tf"][0][3]["transforms"]
+    assert {("enu", "R-1"), ("enu", "R-2"), ("enu", "camera")} <= {(t["parent_frame_id"], t["child_frame_id"])
+                                                                 for t in first}
+    (name, _, log_time, image), = got["/camera/image"]
+    assert name == "foxglove.CompressedImage" and image["format"] == "png"
+    assert base64.b64decode(image["data"]) == png
+    assert log_time == (image["timestamp"]["sec"] * 10**9 + image["timestamp"]["nsec"])
+
+
+def test_twin_run_records_mcap(scene, tmp_path):
+    build, _, _ = scene
+    scenario = tmp_path / "leak.toml"
+    scenario.write_text("""
+[scenario]
+name = "leak"
+seed = 1
+duration_s = 10.0
+step_s = 1.0
+start = "2025-03-20T09:00:00-03:00"
+[[nodes]]
+id = "tank"
+type = "oil_tank"
+period_s = 1.0
+params = { rate_pct_s = 5.0 }
+[[nodes]]
+id = "render"
+type = "render"
+[[edges]]
+from = "tank.level"
+to = "render.reactor_A1.oil_level_tank"
+type = "float"
+unit = "%"
+""")
+    rec = tmp_path / "run.mcap"
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(scenario), "--out", str(build),
+                           "--record", str(rec)], cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = _mcap(rec)
+    states = [m for *_, m in got["/twin/state"]]
+    assert len(states) == 11 and states[4]["values"]["tank.level"] == pytest.approx(80.0 * 1.01)
+    times = [t for _, _, t, _ in got["/twin/state"]]
+    assert times[1] - times[0] == 10**9  # simulated time, 1 s steps
+    pointer = [m for *_, tf in got["/tf"] for m in tf["transforms"] if m["child_frame_id"] == "R-1/body/pointer"]
+    assert len(pointer) == 11 and pointer[0]["rotation"] != pointer[-1]["rotation"]

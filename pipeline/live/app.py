@@ -19,6 +19,7 @@ from ..runtime.site import load_site
 from .camera import LiveCamera
 from .clock import SimClock, check_speed, parse_instant
 from .default_scenario import default_scenario
+from .foxglove_io import FoxgloveLive, McapLog, Recorder
 from .render_worker import RenderJob, RenderWorker
 from .server import LiveServer
 from .twin import LiveTwin
@@ -43,7 +44,8 @@ def sensor_of(config: Path | None):
 
 def make_server(build: Path, sources: Path, scenario: Path | None = None, *, speed: float = 1.0,
                 start: str | None = None, bind: str = "127.0.0.1", port: int = 5555, sensor: Path | None = None,
-                render: bool = True, step_s: float = 1.0, record: Path | None = None) -> LiveServer:
+                render: bool = True, step_s: float = 1.0, record: Path | None = None,
+                foxglove: bool = True) -> LiveServer:
     build, sources = Path(build), Path(sources)
     site = load_site(build, sources)
     zone = scene_zone(build) or site.zone
@@ -73,11 +75,17 @@ def make_server(build: Path, sources: Path, scenario: Path | None = None, *, spe
     worker = None
     if render:
         worker = RenderWorker(RenderJob(str(build), str(sources), cam, sc.seed))
-    recorder = None
+    sinks = []
     if record is not None:
-        from .record import Recorder
-
-        recorder = Recorder(record, twin)
+        sinks.append(McapLog(record))
+    if foxglove:
+        try:
+            sinks.append(FoxgloveLive(bind, port + 3 if port else 0))
+        except Exception as e:  # noqa: BLE001 - the SDK's own error type: a port in use
+            for s in sinks:
+                s.close()
+            raise UserError(f"{bind}:{port + 3}", None, f"cannot serve Foxglove's protocol: {e} (try --port 0)") from None
+    recorder = Recorder(twin, sinks) if sinks else None
     info = {"versions": versions(), "site": {"origin": {"latitude_deg": site.origin[0], "longitude_deg": site.origin[1],
                                                        "height_m": site.origin[2]},
                                             "timezone": str(zone) if zone else None,

@@ -38,8 +38,8 @@ class LiveServer:
         self.wake = asyncio.Event()
         self.latency_ms: deque[float] = deque(maxlen=10000)  # step due -> published, clock-driven steps
         self.stats = {"steps": 0, "published": 0, "requests": 0, "bad_requests": 0, "undelivered_replies": 0,
-                      "renders": 0, "render_failures": 0, "ws_dropped": 0, "steps_jumped": 0}
-        self.last_render_error = ""
+                      "renders": 0, "render_failures": 0, "ws_dropped": 0, "record_errors": 0}
+        self.last_render_error = self.last_record_error = ""
         self.zmq: ZmqSockets | None = None
         self.ws: WebSocketFeed | None = None
         self.endpoints: dict = {}
@@ -55,6 +55,9 @@ class LiveServer:
             ws_port = await self.ws.start(self.bind, self.port + 2 if self.port else 0)
             self.endpoints = {**self.zmq.endpoints, "websocket": f"ws://{self.bind}:{ws_port}/ws",
                               "page": f"http://{self.bind}:{ws_port}/"}
+            fox = [s for s in (self.recorder.sinks if self.recorder else []) if hasattr(s, "port")]
+            if fox:
+                self.endpoints["foxglove"] = f"ws://{self.bind}:{fox[0].port}"
             if self.worker is not None:
                 self.worker.start()  # the scene loads while the twin runs
             self._advance(self._due(), None)
@@ -98,8 +101,15 @@ class LiveServer:
         self.zmq.publish(protocol.encode(msg))
         self.ws.publish(msg)
         if self.recorder is not None:
-            self.recorder.state(self.twin, msg)
+            self._record(self.recorder.state, self.twin, msg)
         self.stats["published"] += 1
+
+    def _record(self, fn, *args) -> None:
+        try:
+            fn(*args)
+        except Exception as e:  # noqa: BLE001 - a full disk stops the recording, not the twin
+            self.stats["record_errors"] += 1
+            self.last_record_error = f"{type(e).__name__}: {e}"
 
     async def _ticker(self) -> None:
         while not self.stop.is_set():
@@ -211,7 +221,7 @@ class LiveServer:
         if req.get("labels"):
             reply["labels"] = out["record"]
         if self.recorder is not None:
-            self.recorder.image(plan, out["png"])
+            self._record(self.recorder.image, plan, out["png"])
         return reply, frames
 
     # -- descriptions
@@ -229,7 +239,7 @@ class LiveServer:
         lat = np.percentile(self.latency_ms, [50, 99]).tolist() if self.latency_ms else None
         stats = {**self.stats, "ws_dropped": self.ws.dropped if self.ws else 0, "seq": self.seq,
                  "step_latency_ms": {"p50": lat[0], "p99": lat[1], "n": len(self.latency_ms)} if lat else None,
-                 "last_render_error": self.last_render_error,
+                 "last_render_error": self.last_render_error, "last_record_error": self.last_record_error,
                  "render_process": {"pid": self.worker.pid, "load_s": self.worker.load_s,
                                     "starts": self.worker.starts} if self.worker else None}
         return {"protocol": protocol.PROTOCOL, "versions": self.info.get("versions", {}),
