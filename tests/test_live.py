@@ -413,3 +413,57 @@ unit = "%"
     assert times[1] - times[0] == 10**9  # simulated time, 1 s steps
     pointer = [m for *_, tf in got["/tf"] for m in tf["transforms"] if m["child_frame_id"] == "R-1/body/pointer"]
     assert len(pointer) == 11 and pointer[0]["rotation"] != pointer[-1]["rotation"]
+
+
+# --- the live page in Chromium ----------------------------------------------------------------
+
+
+def test_the_live_page_moves_the_pointer_within_a_second_of_a_set(scene):
+    """A `set` of an oil level on the ZeroMQ socket shows as the pointer's new angle in
+    the page (Chromium, headless) within 1 s; the angle is the binding's mapping."""
+    import shutil
+
+    from pipeline.viewer import check
+
+    lacking = [n for n in check.missing() if n in ("node", "chromium", "playwright-core")]
+    if lacking:
+        message = f"missing {', '.join(lacking)}: {check.HINT}"
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    build, sources, config = scene
+    proc, endpoints = start_twin(build, sources, "--sensor", config, "--start", START, "--no-render")
+    c = Client(endpoints["commands"])
+    page = None
+    try:
+        binding = next(b for b in c("hello")["scene"]["bindings"]
+                       if b["tag"] == "R-1" and b["effect"] == "rotate")
+        page = subprocess.Popen([shutil.which("node"), str(ROOT / "tools" / "live_check.mjs"), "--url",
+                                 endpoints["page"], "--selector", "#pointer-R-1-pointer"],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                env={**os.environ, "CHROMIUM": str(check.chromium())})
+        ready = json.loads(page.stdout.readline() or "{}")
+        assert ready.get("ready"), (ready, page.stderr.read() if page.poll() is not None else "")
+        for level in (20.0, 75.0):
+            page.stdin.write("watch\n")
+            page.stdin.flush()
+            time.sleep(0.2)  # the page is watching
+            sent = time.time()
+            c("set", values={"render.reactor_A1.oil_level_tank": level})
+            changed = json.loads(page.stdout.readline())
+            assert "at" in changed, changed
+            latency = changed["at"] / 1000.0 - sent
+            print(f"set -> pointer in the page: {latency * 1000:.1f} ms")
+            assert latency < 1.0, latency
+            d0, d1 = binding["domain"]
+            r0, r1 = binding["range"]
+            assert changed["angle"] == pytest.approx(math.degrees(r0 + (level - d0) / (d1 - d0) * (r1 - r0)), abs=1e-3)
+        page.stdin.write("quit\n")
+        page.stdin.flush()
+        page.wait(30)
+    finally:
+        if page is not None and page.poll() is None:
+            page.kill()
+        c("shutdown")
+        proc.wait(30)
+        c.close()
