@@ -230,17 +230,19 @@ def baseline(dataset_folder: Path, out: Path | None, sources: Path):
                    "(default: 640x480, the phone's defaults)")
 @click.option("--record", type=click.Path(path_type=Path), default=None,
               help="write the run to this MCAP file (Foxglove schemas)")
+@click.option("--step", type=click.FloatRange(min=0.001), default=1.0, show_default=True,
+              help="without a SCENARIO: the default scenario's step, simulated seconds")
 @click.option("--no-render", is_flag=True, help="no Blender process: every command but render")
 @click.option("--no-foxglove", is_flag=True, help="do not serve Foxglove's live protocol (on PORT+3)")
 @user_errors
 def serve(scenario: Path | None, out: Path, sources: Path, speed: float, start: str | None, bind: str, port: int,
-          sensor: Path | None, record: Path | None, no_render: bool, no_foxglove: bool):
+          sensor: Path | None, record: Path | None, step: float, no_render: bool, no_foxglove: bool):
     """The live twin: the scenario (default: every bound state settable) on a simulated clock,
     commands on tcp://BIND:PORT (ZeroMQ, JSON), state published every step, renders on request."""
     from .live.app import make_server, serve as run_server
 
     run_server(make_server(out, sources, scenario, speed=speed, start=start, bind=bind, port=port, sensor=sensor,
-                           render=not no_render, record=record, foxglove=not no_foxglove))
+                           render=not no_render, record=record, foxglove=not no_foxglove, step_s=step))
 
 
 @main.command()
