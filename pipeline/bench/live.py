@@ -248,6 +248,9 @@ def live_section(ctx: Context, dataset: dict | None = None) -> dict:
     for hz, seconds in ((1.0, ctx.pick(10, 60)), (30.0, ctx.pick(10, 60))):
         out[f"at_{hz:g}_hz"] = _latency(build, ctx.sources, hz, seconds, commands)
     out["page"] = _page(build, ctx.sources, ctx.pick(3, 10))
+    if not (ctx.sources / CONFIG).is_file():  # its sensor and PTZ presets drive the renders
+        out["render"] = out["memory"] = {"skipped": f"no {CONFIG} in these sources"}
+        return out
     out["render"] = _renders(ctx, build, dataset)
     out["memory"] = _memory(ctx, build)
     return out

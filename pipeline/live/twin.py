@@ -68,7 +68,7 @@ class LiveTwin:
     def advance(self, k: int) -> list[tuple[int, dict]]:
         """Step the graph to step k; [(step, changed port values)] for each step run (one
         step after a jump: a seek, or a clock more than MAX_CATCH_UP steps ahead)."""
-        if k <= self.engine.k and not self.engine.pending:
+        if k == self.engine.k and not self.engine.pending:
             return []
         if k < self.engine.k or k - self.engine.k > MAX_CATCH_UP:
             self.engine.seek(k)
