@@ -225,6 +225,7 @@ def test_malformed_input_gets_an_error_and_the_twin_goes_on(twin):
     d.setsockopt(zmq.LINGER, 0)
     d.connect(endpoints["commands"])
     d.send_multipart([b"", b'{"cmd": "render"}'])
+    time.sleep(0.5)  # the request is in; the client goes before its reply
     d.close()
     assert c("hello")["ok"]
 
@@ -282,6 +283,22 @@ def _gone(pid: int) -> bool:
     # a zombie still answers kill 0: its state says so
     status = Path(f"/proc/{pid}/status")
     return not status.exists() or "\nState:\tZ" in status.read_text()
+
+
+def test_a_render_process_that_dies_is_an_error_reply_and_the_next_render_starts_another(twin):
+    _, _, c = twin
+    stats = c("hello")["stats"]
+    assert stats["undelivered_replies"] >= 1  # the client that vanished with a render in flight
+    pid = stats["render_process"]["pid"]
+    os.kill(pid, signal.SIGKILL)
+    bad = c("render")
+    assert not bad["ok"] and "render process died" in bad["error"]
+    assert c("get", ports=["clock.t"])["ok"]  # the clock goes on
+    good = c("render")
+    assert good["ok"] and c.frames[0].startswith(b"\x89PNG")
+    stats = c("hello")["stats"]
+    assert stats["render_failures"] >= 1 and stats["render_process"]["starts"] == 2
+    assert stats["render_process"]["pid"] != pid and _gone(pid)
 
 
 def test_shutdown_ends_the_twin_and_its_blender_process(twin):
