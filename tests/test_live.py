@@ -208,6 +208,28 @@ def test_camera_presets_poses_and_zoom(twin):
     assert c("camera")["camera"]["name"] == "pose"  # unchanged by the failures
 
 
+def test_the_websocket_carries_a_snapshot_then_the_published_messages(twin):
+    from websockets.sync.client import connect
+
+    _, endpoints, c = twin
+    with connect(endpoints["websocket"]) as ws:
+        snapshot = json.loads(ws.recv(timeout=5))
+        protocol.check("published", snapshot)
+        assert set(snapshot["values"]) == {p["name"] for p in c("hello")["ports"]}
+        c("set", values={"render.reactor_A2.oil_level_b1": 33.0})
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline:
+            msg = json.loads(ws.recv(timeout=5))
+            protocol.check("published", msg)
+            if "render.reactor_A2.oil_level_b1" in msg["values"]:
+                break
+        assert msg["values"]["render.reactor_A2.oil_level_b1"] == 33.0 and msg["seq"] > snapshot["seq"]
+    import urllib.request
+
+    with urllib.request.urlopen(endpoints["page"], timeout=10) as r:
+        assert b"/hello.json" in r.read() and r.headers["Content-Type"].startswith("text/html")
+
+
 def test_malformed_input_gets_an_error_and_the_twin_goes_on(twin):
     _, endpoints, c = twin
     for raw, words in [(b"{", ["malformed JSON"]), (b"\xff\xfe", ["malformed JSON"]), (b"[1, 2]", ["JSON object"]),

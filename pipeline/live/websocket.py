@@ -35,6 +35,7 @@ class WebSocketFeed:
         self.dropped = 0  # over all browsers, since the start
         self.server = None
         self.port: int | None = None
+        self._handlers: set[asyncio.Task] = set()
 
     async def start(self, bind: str, port: int) -> int:
         self.server = await serve(self._handler, bind, port, process_request=self._http, compression=None)
@@ -53,6 +54,7 @@ class WebSocketFeed:
     async def _handler(self, ws: ServerConnection) -> None:
         c = _Client()
         self.clients.add(c)
+        self._handlers.add(asyncio.current_task())
         try:
             await ws.send(json.dumps(self.snapshot(), separators=(",", ":")))
             while True:
@@ -61,6 +63,7 @@ class WebSocketFeed:
             pass
         finally:
             self.clients.discard(c)
+            self._handlers.discard(asyncio.current_task())
 
     def _http(self, ws: ServerConnection, request: Request) -> Response | None:
         path = request.path.split("?")[0]
@@ -74,8 +77,14 @@ class WebSocketFeed:
 
     async def close(self) -> None:
         if self.server is not None:
+            # a handler waits on its queue, which nothing fills once the clock stops
+            for task in list(self._handlers):
+                task.cancel()
             self.server.close()
-            await self.server.wait_closed()
+            try:
+                await asyncio.wait_for(self.server.wait_closed(), 10)
+            except asyncio.TimeoutError:
+                pass
 
 
 def _with_dropped(message: dict, c: _Client) -> str:
