@@ -18,6 +18,7 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -31,14 +32,16 @@ START = "2025-03-20T10:00:00"  # the site's wall clock: the sun up
 
 def _serve(build: Path, sources: Path, *args) -> tuple[subprocess.Popen, dict]:
     root = Path(__file__).resolve().parents[2]
+    log = tempfile.TemporaryFile("w+")  # its stderr, read only if it fails: a pipe nobody reads fills up
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")]))}
     proc = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "serve", "--out", str(build), "--sources",
                              str(sources), "--port", "0", "--start", START, "--no-foxglove", *map(str, args)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+                            stdout=subprocess.PIPE, stderr=log, text=True, env=env)
     line = proc.stdout.readline()
     if not line:
         proc.wait(30)
-        raise RuntimeError(f"twin serve did not start: {proc.stderr.read()[-2000:]}")
+        log.seek(0)
+        raise RuntimeError(f"twin serve did not start: {log.read()[-2000:]}")
     return proc, json.loads(line)
 
 

@@ -124,6 +124,7 @@ def _serve(conn, job: RenderJob) -> None:
     from ..runtime.site import load_site
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group: the twin ends us
+    _quiet()
     init_blender_process()
     t0 = time.perf_counter()
     try:
@@ -156,3 +157,16 @@ def _serve(conn, job: RenderJob) -> None:
                               "depth": npy, "record": record, "seconds": time.perf_counter() - t0}))
         except Exception as e:  # noqa: BLE001 - one failed frame; the scene stays loaded
             conn.send(("error", f"render failed: {type(e).__name__}: {e}"))
+
+
+def _quiet() -> None:
+    """Blender's importers print a line per object to stdout: into /dev/null, not into
+    the twin's stdout (a pipe its caller may not read, whose full buffer would block this
+    process). stderr stays: a crash's message is worth keeping."""
+    import os
+    import sys
+
+    sys.stdout.flush()
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    os.close(devnull)
