@@ -506,3 +506,24 @@ def test_the_live_page_moves_the_pointer_within_a_second_of_a_set(scene):
         c("shutdown")
         proc.wait(30)
         c.close()
+
+
+# --- bad command lines ----------------------------------------------------------------------
+
+
+def test_bad_flags_and_a_taken_port_are_one_clear_error(scene, tmp_path):
+    build, sources, config = scene
+    taken = zmq.Context.instance().socket(zmq.REP)
+    port = taken.bind_to_random_port("tcp://127.0.0.1")
+    try:
+        for args, words in [(["--port", port], ["cannot serve", str(port)]),
+                            (["--speed", "0"], ["--speed", "speed 0.0"]),
+                            (["--start", "yesterday"], ["--start", "'yesterday'"]),
+                            (["--out", tmp_path / "nothing"], ["no built scene"])]:
+            proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "serve", "--out", str(build), "--sources",
+                                   str(sources), "--no-render", "--no-foxglove", *map(str, args)], cwd=ROOT,
+                                  env=_env(), capture_output=True, text=True, timeout=120)
+            assert proc.returncode == 1, (args, proc.stdout, proc.stderr)
+            assert all(w in proc.stderr for w in words) and "Traceback" not in proc.stderr, (args, proc.stderr)
+    finally:
+        taken.close()
