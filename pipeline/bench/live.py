@@ -163,14 +163,14 @@ def _renders(ctx: Context, build: Path, dataset: dict | None) -> dict:
         _stop(proc, c)
 
 
-def _memory(ctx: Context, build: Path) -> dict:
+def _memory(ctx: Context, build: Path, sources: Path, config: Path) -> dict:
     """RSS of the twin over 10,000 steps (1 s steps at 1000x), and of it and its Blender
-    process over renders (160x120: a leak per render shows at any size)."""
+    process over renders (at the sensor of `config`, a dataset config: a leak per render
+    shows at any size)."""
     from ..live.client import LiveClient
 
     steps, renders = ctx.pick(2000, 10000), ctx.pick(10, 100)
-    config = _config(ctx.sources / CONFIG, ctx.work / "live_memory.toml", 1, 160, 120)
-    proc, ep = _serve(build, ctx.sources, "--sensor", config, "--speed", 1000)
+    proc, ep = _serve(build, sources, "--sensor", config, "--speed", 1000)
     c = LiveClient(ep["commands"], timeout_s=3600)
     try:
         while c("hello")["stats"]["steps"] < steps // 10:
@@ -255,5 +255,6 @@ def live_section(ctx: Context, dataset: dict | None = None) -> dict:
         out["render"] = out["memory"] = {"skipped": f"no {CONFIG} in these sources"}
         return out
     out["render"] = _renders(ctx, build, dataset)
-    out["memory"] = _memory(ctx, build)
+    out["memory"] = _memory(ctx, build, ctx.sources,
+                            _config(ctx.sources / CONFIG, ctx.work / "live_memory.toml", 1, 160, 120))
     return out
