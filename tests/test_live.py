@@ -419,28 +419,7 @@ def test_serve_records_mcap_and_speaks_foxglove(scene, tmp_path):
 
 def test_twin_run_records_mcap(scene, tmp_path):
     build, _, _ = scene
-    scenario = tmp_path / "leak.toml"
-    scenario.write_text("""
-[scenario]
-name = "leak"
-seed = 1
-duration_s = 10.0
-step_s = 1.0
-start = "2025-03-20T09:00:00-03:00"
-[[nodes]]
-id = "tank"
-type = "oil_tank"
-period_s = 1.0
-params = { rate_pct_s = 5.0 }
-[[nodes]]
-id = "render"
-type = "render"
-[[edges]]
-from = "tank.level"
-to = "render.reactor_A1.oil_level_tank"
-type = "float"
-unit = "%"
-""")
+    scenario = ROOT / "tests" / "live_leak.toml"
     rec = tmp_path / "run.mcap"
     proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "run", str(scenario), "--out", str(build),
                            "--record", str(rec)], cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=300)

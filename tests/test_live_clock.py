@@ -91,3 +91,25 @@ def test_turbidity_set_from_outside_changes_the_irradiance(twin):
     twin.advance(0)
     assert twin.get(["sun.irradiance"])["sun.irradiance"] < before
     assert twin.frame_plan(48, 36).tau_atm == 0.6
+
+
+def test_a_held_input_let_go_reads_its_edge_again(tmp_path):
+    from pathlib import Path
+
+    from pipeline.live.app import make_server
+
+    build, sources, _ = live_scene.make(tmp_path)
+    scenario = tmp_path / "leak.toml"
+    scenario.write_text((Path(__file__).parent / "live_leak.toml").read_text())
+    twin = make_server(build, sources, scenario, port=0, render=False, foxglove=False).twin
+    twin.advance(4)
+    port = "render.reactor_A1.oil_level_tank"
+    assert twin.get([port])[port] == twin.get(["tank.level"])["tank.level"] == pytest.approx(80.0 * 1.01)
+    twin.set({port: 12.5})
+    twin.advance(5)
+    assert twin.get([port])[port] == 12.5
+    twin.set({port: None})
+    twin.advance(6)
+    assert twin.get([port])[port] == twin.get(["tank.level"])["tank.level"] == pytest.approx(70.0 * 1.01)
+    with pytest.raises(ValueError, match="output"):
+        twin.set({"tank.level": None})

@@ -105,7 +105,8 @@ class LiveTwin:
 
     def set(self, values: dict) -> dict:
         """Check every value first (nothing changes if one is bad), then hold inputs and
-        set constants; the changes show at the next step. Returns the typed values."""
+        set constants; None lets an input go (it reads its edge or default again). The
+        changes show at the next step. Returns the typed values."""
         typed = {}
         for name, raw in values.items():
             spec = self.ports.get(name)
@@ -115,10 +116,17 @@ class LiveTwin:
                 raise ValueError(f"{name} is an output of {spec.node}: set one of its inputs, or a constant")
             if spec.node == self.camera_id and spec.port == "zoom":
                 raise ValueError(f"{name}: zoom the camera with the camera command")
+            if raw is None:  # let go: the input reads its edge (or its default) again
+                if spec.kind == "output":
+                    raise ValueError(f"{name}: a constant has nothing to return to; set a value")
+                typed[name] = None
+                continue
             typed[name] = check_value(spec, raw, switch=spec.node in self.switches)
         for name, value in typed.items():
             spec = self.ports[name]
-            if spec.kind == "output":
+            if value is None:
+                self.engine.release(spec.node, spec.port)
+            elif spec.kind == "output":
                 self.engine.set_value(spec.node, value)
             else:
                 self.engine.hold(spec.node, spec.port, value)
