@@ -4,8 +4,10 @@ client would, each figure beside its goal (issue 34):
 - step and publish latency (the step due on the clock -> its message sent, measured by
   the twin; sent -> received by a ZeroMQ subscriber) p50/p99 at 1 Hz and 30 Hz;
 - command round trip p50/p99 of get (one port, every port) and set;
-- render on request at 640x480 after a warm-up, against the dataset section's steady
-  seconds per frame in the same run (and the render process: started once, no reload);
+- render on request at 640x480 after a warm-up: a short `twin dataset` run's frames
+  rendered again on request (their instant, camera, states, sky and seed), seconds
+  against that run's steady frame in the same conditions, bytes compared, and the
+  render process started once (no reload);
 - set -> visible in the live page (Chromium), when a browser is installed;
 - memory (RSS) over 10,000 steps and over renders: the twin's and its Blender process's.
 """
@@ -181,6 +183,8 @@ def _renders(ctx: Context, build: Path, dataset: dict | None) -> dict:
         return {"frame": f"{width}x{height}", "frames": frames, "first_render_s": first,
                 "scene_load_s": proc_info["load_s"], "render_s": seconds, "render_median_s": median,
                 "dataset_steady_frame_s": steady, "dataset_frame_s": timings["frame_s"],
+                "dataset_section_steady_frame_s": (dataset or {}).get("runs", {}).get("local_1", {})
+                .get("steady_frame_median_s"),
                 "ratio_to_dataset": median / steady, "identical_to_dataset": identical,
                 "process_starts": proc_info["starts"], "load_average": list(os.getloadavg()),
                 "goal": "ratio <= 1.0, no scene reload (process_starts == 1)"}
