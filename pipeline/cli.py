@@ -140,14 +140,20 @@ def validate(sources: Path, out: Path):
 @main.command()
 @click.argument("scenario", type=click.Path(path_type=Path))
 @OUT
+@click.option("--record", type=click.Path(path_type=Path), default=None,
+              help="also write the run as MCAP (Foxglove schemas: states, moving parts) to this file")
 @user_errors
-def run(scenario: Path, out: Path):
+def run(scenario: Path, out: Path, record: Path | None):
     """Run a scenario on the built scene OUT: states and variants over time, into OUT/runs/<scenario>/."""
     from .progress import bar
     from .runtime.run import run_scenario
 
     with bar("running") as progress:
         summary = run_scenario(scenario, out, progress=progress)
+    if record is not None:
+        from .live.foxglove_io import record_run
+
+        summary["record"] = record_run(scenario, out, record)
     click.echo(json.dumps(summary, indent=1, sort_keys=True))
 
 
@@ -227,6 +233,39 @@ def baseline(dataset_folder: Path, out: Path | None, sources: Path):
     with bar("frames") as progress:
         report = run_baseline(dataset_folder, out, sources=sources, progress=progress.update)
     click.echo(str(report))
+
+@main.command()
+@click.argument("scenario", type=click.Path(path_type=Path), required=False)
+@OUT
+@SOURCES
+@click.option("--speed", type=float, default=1.0, show_default=True,
+              help="simulated seconds per real second (the study's accelerated virtual time)")
+@click.option("--start", metavar="ISO-TIME", default=None,
+              help="the clock's first instant (without an offset: the site's wall-clock time; "
+                   "default: the scenario's start, or now)")
+@click.option("--bind", default="127.0.0.1", show_default=True, help="address the sockets listen on")
+@click.option("--port", type=click.IntRange(0, 65532), default=5555, show_default=True,
+              help="the command socket; PUB on PORT+1, the WebSocket and live page on PORT+2, Foxglove's "
+                   "protocol on PORT+3 (0: any free ones)")
+@click.option("--sensor", type=click.Path(path_type=Path), default=None,
+              help="a dataset config whose [sensor] renders use and whose PTZ presets the camera knows "
+                   "(default: 640x480, the phone's defaults)")
+@click.option("--record", type=click.Path(path_type=Path), default=None,
+              help="write the run to this MCAP file (Foxglove schemas)")
+@click.option("--step", type=click.FloatRange(min=0.001), default=1.0, show_default=True,
+              help="without a SCENARIO: the default scenario's step, simulated seconds")
+@click.option("--no-render", is_flag=True, help="no Blender process: every command but render")
+@click.option("--no-foxglove", is_flag=True, help="do not serve Foxglove's live protocol (on PORT+3)")
+@user_errors
+def serve(scenario: Path | None, out: Path, sources: Path, speed: float, start: str | None, bind: str, port: int,
+          sensor: Path | None, record: Path | None, step: float, no_render: bool, no_foxglove: bool):
+    """The live twin: the scenario (default: every bound state settable) on a simulated clock,
+    commands on tcp://BIND:PORT (ZeroMQ, JSON), state published every step, renders on request."""
+    from .live.app import make_server, serve as run_server
+
+    run_server(make_server(out, sources, scenario, speed=speed, start=start, bind=bind, port=port, sensor=sensor,
+                           render=not no_render, record=record, foxglove=not no_foxglove, step_s=step))
+
 
 @main.command()
 @OUT

@@ -23,7 +23,7 @@ from .stats import machine
 
 
 def _sections(results: dict):
-    from . import blender_peer, builds, dataset, gazebo, gltf_transform, sections, viewer
+    from . import blender_peer, builds, dataset, gazebo, gltf_transform, live, sections, viewer
 
     return [
         ("build", builds.build_section),
@@ -35,6 +35,7 @@ def _sections(results: dict):
         ("sun", lambda ctx: sections.sun_section(ctx, results.get("runtime", {}).get("data"))),
         ("render", sections.render_section),
         ("dataset", dataset.dataset_section),
+        ("live", lambda ctx: live.live_section(ctx, results.get("dataset", {}).get("data"))),
         ("blender", blender_peer.blender_section),
         ("blender_reexport", blender_peer.reexport_section),
         ("gltf_transform", gltf_transform.gltf_transform_section),

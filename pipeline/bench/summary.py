@@ -36,7 +36,18 @@ def rows(sections: dict) -> list[dict]:
     out += _gazebo_rows(data.get("gazebo"))
     out += _viewer_rows(data.get("viewer"))
     out += _dataset_rows(data.get("dataset"))
+    out += _live_rows(data.get("live"))
     return [r for r in out if r is not None]
+
+
+def _live_rows(d):
+    """A render on request from the live twin's kept scene against the dataset's steady
+    frame (goal: at most 1.0x)."""
+    r = (d or {}).get("render") or {}
+    if not r.get("dataset_steady_frame_s"):
+        return []
+    return [_row("live", "s per render on request", r["render_median_s"], r["dataset_steady_frame_s"], "s",
+                 "twin dataset, steady frame", f"{r['frame']}, after a warm-up")]
 
 
 def _dataset_rows(d):

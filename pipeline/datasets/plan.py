@@ -135,15 +135,7 @@ class Planner:
             return config.local_time(wall + dt.timedelta(hours=1), self.site.zone)
 
     def _aim(self, tag: str) -> np.ndarray:
-        """Where a camera aims at a placement: its gauge's dial when it has one, else the
-        centre of its bounding box."""
-        p = self.site.placement(tag)
-        m = self.site.manifests.get(p["asset"], {})
-        dial = dial_of(self.site.pose(p), m)
-        if dial is not None:
-            return dial.centre
-        lo, hi = np.array(m["bounds"][0]), np.array(m["bounds"][1])
-        return (self.site.pose(p) @ np.r_[(lo + hi) / 2, 1.0])[:3]
+        return aim(self.site, tag)
 
     def _pose(self, cam: Camera, ci: int, rng: np.random.Generator) -> tuple[np.ndarray, str, str, float | None]:
         """(camera pose, target tag or "", the camera's name in the labels, the preset's
@@ -172,16 +164,7 @@ class Planner:
         return look_at(eye, eye + ahead * 10.0 + np.array([0.0, 0.0, -0.5])), "", f"route{ci}@{s:.1f}m", None
 
     def _mast_eye(self, mast: str) -> np.ndarray:
-        """The PTZ head's lens: above the tilt joint of the mast's model."""
-        p = self.site.placement(mast)
-        joints = self.site.manifests[p["asset"]].get("joints", [])
-        tilt = next((j for j in joints if "tilt" in j["name"]), None)
-        if tilt is None:
-            _, hi = self.site.manifests[p["asset"]]["bounds"]
-            local = np.array([0.0, 0.0, hi[2] + MAST_EYE_ABOVE_TILT_M])
-        else:
-            local = np.array(tilt["pose"]).reshape(4, 4)[:3, 3] + [0.0, 0.0, MAST_EYE_ABOVE_TILT_M]
-        return (self.site.pose(p) @ np.r_[local, 1.0])[:3]
+        return mast_eye(self.site, mast)
 
     def _states(self, rng: np.random.Generator):
         from ..runtime import nodes
@@ -201,13 +184,44 @@ class Planner:
         return oil, switches, nodes.visual_states(values, observed)
 
     def _visible(self, shot: Shot) -> list[str]:
-        """Placements the camera sees or that shadow into what it sees (culling)."""
-        k = intrinsics(shot.lens.hfov, self.cfg.sensor.width, self.cfg.sensor.height)
-        sun = shot.sun_dir if shot.sun_elevation > 0 else None
-        tags = {it["tag"] for it in cull(self.spheres, shot.cam_pose, k, shot.lens.near, shot.lens.far, sun)}
-        if shot.target:
-            tags.add(shot.target)
-        return sorted(tags)
+        return visible_tags(self.spheres, shot, self.cfg.sensor.width, self.cfg.sensor.height)
+
+
+def aim(site: Site, tag: str) -> np.ndarray:
+    """Where a camera aims at a placement: its gauge's dial when it has one, else the
+    centre of its bounding box."""
+    p = site.placement(tag)
+    m = site.manifests.get(p["asset"], {})
+    dial = dial_of(site.pose(p), m)
+    if dial is not None:
+        return dial.centre
+    lo, hi = np.array(m["bounds"][0]), np.array(m["bounds"][1])
+    return (site.pose(p) @ np.r_[(lo + hi) / 2, 1.0])[:3]
+
+
+def mast_eye(site: Site, mast: str) -> np.ndarray:
+    """A PTZ head's lens: above the tilt joint of the mast's model."""
+    p = site.placement(mast)
+    joints = site.manifests[p["asset"]].get("joints", [])
+    tilt = next((j for j in joints if "tilt" in j["name"]), None)
+    if tilt is None:
+        _, hi = site.manifests[p["asset"]]["bounds"]
+        local = np.array([0.0, 0.0, hi[2] + MAST_EYE_ABOVE_TILT_M])
+    else:
+        local = np.array(tilt["pose"]).reshape(4, 4)[:3, 3] + [0.0, 0.0, MAST_EYE_ABOVE_TILT_M]
+    return (site.pose(p) @ np.r_[local, 1.0])[:3]
+
+
+def visible_tags(spheres: list[dict], shot: Shot, width: int, height: int) -> list[str]:
+    """Placements the camera sees or that shadow into what it sees (culling), the shot's
+    target always: what a frame shows (`twin dataset`'s and `twin serve`'s alike).
+    spheres: Site.spheres()."""
+    k = intrinsics(shot.lens.hfov, width, height)
+    sun = shot.sun_dir if shot.sun_elevation > 0 else None
+    tags = {it["tag"] for it in cull(spheres, shot.cam_pose, k, shot.lens.near, shot.lens.far, sun)}
+    if shot.target:
+        tags.add(shot.target)
+    return sorted(tags)
 
 
 def switch_angles(manifest: dict, position: str) -> dict[str, float]:

@@ -186,7 +186,7 @@ def local_frames(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
 
     temp = pool_folder()  # the scratch frames and Blender's session folders, whatever becomes of a process
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               max_tasks_per_child=tasks_per_worker, initializer=_init_blender_process,
+                               max_tasks_per_child=tasks_per_worker, initializer=init_blender_process,
                                initargs=(temp,))
     try:
         yield pool
@@ -195,7 +195,7 @@ def local_frames(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
         shutil.rmtree(temp, ignore_errors=True)
 
 
-def _init_blender_process(temp: str | None = None) -> None:
+def init_blender_process(temp: str | None = None) -> None:
     """A spawned child starts with its parent's sys.path: when the parent imported bpy,
     that holds Blender's scripts/modules, whose pure-Python `bpy` package would shadow
     the real one (No module named '_bpy'). Those entries go; importing bpy adds them back.
@@ -298,16 +298,26 @@ def _context(job: dict) -> dict:
     key = json.dumps(job, sort_keys=True)
     if _WORKER.get("key") == key:
         return _WORKER
-    from ..render.cycles import CyclesScene
-
     if _WORKER.get("scene") is not None:
         _WORKER["scene"].close()
     cfg = dataset_config.load(job["config"])
     site = load_site(Path(job["build"]), Path(job["sources"]))
     cam = PhoneCamera(width=cfg.sensor.width, height=cfg.sensor.height, samples=cfg.sensor.samples,
                       render_denoise=cfg.sensor.render_denoise)
-    scene = CyclesScene(site, cam, cfg.seed)
-    scene.load_many(job["union"])
+    ctx = open_scene(site, cam, cfg.seed, job["union"])
+    _WORKER.clear()
+    _WORKER.update(ctx, key=key, cfg=cfg, planner=Planner(cfg, site, Path(job["sources"])))
+    return _WORKER
+
+
+def open_scene(site: Site, cam: PhoneCamera, seed: int, tags: list[str]) -> dict:
+    """A Cycles scene holding `tags` (and the terrain, and the floodlights of the
+    lighting poles among them), every placement labelled with its instance id: what
+    `shoot` renders frames in (a dataset's worker, `twin serve`'s render process)."""
+    from ..render.cycles import CyclesScene
+
+    scene = CyclesScene(site, cam, seed)
+    scene.load_many(tags)
     scene.load_terrain()
     # every floodlight of the site, whether or not a frame of this run sees its pole:
     # a frame's light is then the same whichever frames share its worker
@@ -317,14 +327,25 @@ def _context(job: dict) -> dict:
     cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
     category_of = {p["tag"]: cats.get(site.manifests.get(p["asset"], {}).get("category") or p["asset"], 0)
                    for p in site.placements}
-    _WORKER.clear()
-    _WORKER.update(key=key, cfg=cfg, site=site, cam=cam, scene=scene, ids=ids,
-                   tag_of={v: k for k, v in ids.items()}, category_of=category_of,
-                   planner=Planner(cfg, site, Path(job["sources"])))
-    return _WORKER
+    return {"site": site, "cam": cam, "scene": scene, "ids": ids, "tag_of": {v: k for k, v in ids.items()},
+            "category_of": category_of}
 
 
 def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
+    rgb, ids, depth, record = shoot(ctx, plan)
+    fid = plan.frame_id
+    _write_png(folder / "images" / f"{fid}.png", rgb[..., ::-1])
+    _write_png(folder / "masks" / f"{fid}.png", ids)
+    with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, depth, allow_pickle=False)
+    atomic_write(folder / "records" / f"{fid}.json", json.dumps(record, sort_keys=True, indent=1) + "\n")
+
+
+def shoot(ctx: dict, plan: FramePlan) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """One frame in an `open_scene`: (RGB uint8 (h, w, 3), instance ids uint16, planar
+    depth float32, the frame's record). Only what the plan names changes in the scene
+    (seed, shown placements, switch joints, camera, sun and sky, bound visuals)."""
     from ..render.frames import develop_shot, pointer_binding
 
     site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
@@ -340,24 +361,25 @@ def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
     rgb, gain, wb, veil = develop_shot(scene, shot, linear, cam, None, plan.seed)
     ids, depth = scene.render_labels()
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
-    record = _record(ctx, plan, k, ids, depth, gain, wb, veil)
-    fid = plan.frame_id
-    _write_png(folder / "images" / f"{fid}.png", rgb[..., ::-1])
-    _write_png(folder / "masks" / f"{fid}.png", ids)
-    with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
-        with open(tmp, "wb") as fh:
-            np.save(fh, depth, allow_pickle=False)
-    atomic_write(folder / "records" / f"{fid}.json", json.dumps(record, sort_keys=True, indent=1) + "\n")
+    return rgb, ids, depth, _record(ctx, plan, k, ids, depth, gain, wb, veil)
 
 
-def _write_png(path: Path, pixels: np.ndarray) -> None:
-    """PNG through OpenCV (no timestamps; 16-bit when the array is): BGR or one channel."""
+def encode_png(pixels: np.ndarray) -> bytes:
+    """PNG bytes through OpenCV (no timestamps; 16-bit when the array is): BGR or one channel."""
     import cv2
 
     ok, buf = cv2.imencode(".png", np.ascontiguousarray(pixels))
     if not ok:
-        raise RuntimeError(f"could not encode {path}")
-    atomic_write(path, buf.tobytes())
+        raise RuntimeError("could not encode a PNG")
+    return buf.tobytes()
+
+
+def _write_png(path: Path, pixels: np.ndarray) -> None:
+    try:
+        data = encode_png(pixels)
+    except RuntimeError:
+        raise RuntimeError(f"could not encode {path}") from None
+    atomic_write(path, data)
 
 
 def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, gain: float,

@@ -217,6 +217,9 @@ class Engine:
         self.k = -1
         self.values: dict[tuple[str, str], object] = {}
         self._forced: set[str] = set()
+        # Inputs held from outside (`twin serve`'s set): node -> port -> value, read in
+        # place of what the port's edge carries (or its default) until released.
+        self.held: dict[str, dict[str, object]] = {}
         # Per node, (input port, source key) pairs, resolved once.
         self._reads = {n: [(e.dst[1], e.src) for e in graph.feeds[n]] for n in graph.nodes}
         self._pos = {n: i for i, n in enumerate(graph.order)}
@@ -240,6 +243,27 @@ class Engine:
         node.value = value
         self._forced.add(node_id)
 
+    def hold(self, node_id: str, port: str, value) -> None:
+        """Feed `node_id.port` with `value` from outside; the node runs at the next step."""
+        self.held.setdefault(node_id, {})[port] = value
+        self._forced.add(node_id)
+
+    def release(self, node_id: str, port: str) -> None:
+        """The port reads its edge (or its default) again from the next step on."""
+        self.held.get(node_id, {}).pop(port, None)
+        self._forced.add(node_id)
+
+    @property
+    def pending(self) -> bool:
+        """Are nodes forced to run at the next step (a set, a hold, a seek)?"""
+        return bool(self._forced)
+
+    def seek(self, k: int) -> None:
+        """The next step is k, and every node runs in it: the clock jumped (every node
+        type is a function of t, its inputs and its parameters)."""
+        self.k = int(k) - 1
+        self._forced.update(self.graph.nodes)
+
     def step(self) -> StepReport:
         self.k += 1
         k, t = self.k, self.t
@@ -260,6 +284,8 @@ class Engine:
         while todo:
             n = g.order[heapq.heappop(todo)]
             inputs = {port: self.values[src] for port, src in self._reads[n] if src in self.values}
+            if n in self.held:
+                inputs.update(self.held[n])
             try:
                 out = g.nodes[n].step(t, inputs)
             except ValueError as e:

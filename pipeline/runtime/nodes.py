@@ -254,6 +254,7 @@ class Sun(Node):
     """
 
     type_name = "sun"
+    inputs = {"tau_atm": Port("float", "1", required=False)}  # the sky's turbidity, when wired or set
     outputs = {"elevation": Port("float", "rad"), "azimuth": Port("float", "rad"),
                "irradiance": Port("float", "W/m2")}
     params = {"lat": None, "lon": None, "model": "ephemeris", "refraction": False,
@@ -274,7 +275,8 @@ class Sun(Node):
         if self.p["model"] == "study":
             elev = sun.study_elevation(self.lat, self.lon, when)
         e = math.radians(elev)
-        return {"elevation": e, "azimuth": math.radians(az), "irradiance": sun.irradiance(e, self.tau_atm, self.g0)}
+        tau = float(inputs.get("tau_atm", self.tau_atm))
+        return {"elevation": e, "azimuth": math.radians(az), "irradiance": sun.irradiance(e, tau, self.g0)}
 
 
 class Camera(Node):
