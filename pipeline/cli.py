@@ -256,15 +256,23 @@ def baseline(dataset_folder: Path, out: Path | None, sources: Path):
               help="without a SCENARIO: the default scenario's step, simulated seconds")
 @click.option("--no-render", is_flag=True, help="no Blender process: every command but render")
 @click.option("--no-foxglove", is_flag=True, help="do not serve Foxglove's live protocol (on PORT+3)")
+@click.option("--inputs", type=click.Path(path_type=Path), default=None,
+              help="external signals (IEC 61850, MQTT) mapped onto settable inputs: a TOML file "
+                   "(schemas/inputs.schema.json)")
+@click.option("--gazebo", "gazebo_world", metavar="WORLD", default=None,
+              help="push the sun, switch joints and bound materials into the running gz-sim world WORLD "
+                   "(its transport; tools/gzbridge)")
 @user_errors
 def serve(scenario: Path | None, out: Path, sources: Path, speed: float, start: str | None, bind: str, port: int,
-          sensor: Path | None, record: Path | None, step: float, no_render: bool, no_foxglove: bool):
+          sensor: Path | None, record: Path | None, step: float, no_render: bool, no_foxglove: bool,
+          inputs: Path | None, gazebo_world: str | None):
     """The live twin: the scenario (default: every bound state settable) on a simulated clock,
     commands on tcp://BIND:PORT (ZeroMQ, JSON), state published every step, renders on request."""
     from .live.app import make_server, serve as run_server
 
     run_server(make_server(out, sources, scenario, speed=speed, start=start, bind=bind, port=port, sensor=sensor,
-                           render=not no_render, record=record, foxglove=not no_foxglove, step_s=step))
+                           render=not no_render, record=record, foxglove=not no_foxglove, step_s=step,
+                           inputs=inputs, gazebo=gazebo_world))
 
 
 @main.command()

@@ -46,6 +46,7 @@ class SignalHub:
         self.states = {s.index: SignalState() for s in self.signals}
         self._lock = threading.Lock()
         self._changes: dict[str, Update] = {}
+        self.on_change = None  # called (from a client's thread) after a change is recorded
 
     def receive(self, signal: Signal, raw) -> None:
         """A value from the source, as it came (decoded by the client's protocol)."""
@@ -65,6 +66,7 @@ class SignalHub:
                 return
             state.value, state.stale, state.changed_at = value, False, now
             self._changes[signal.target] = Update(signal.target, value, False, signal.name, now)
+        self._notify()
 
     def stale(self, signal: Signal, why: str) -> None:
         """The source cannot vouch for the value now (quality, server or broker gone)."""
@@ -76,8 +78,14 @@ class SignalHub:
             first = state.changed_at is None
             state.stale, state.changed_at = True, now
             self._changes[signal.target] = Update(signal.target, state.value, True, signal.name, now)
+        self._notify()
         if not first:
             log.info("%s: stale (%s); holding %s", signal.name, why, state.value)
+
+    def _notify(self) -> None:
+        callback = self.on_change
+        if callback is not None:
+            callback()
 
     def fault(self, signal: Signal, message: str) -> None:
         with self._lock:

@@ -20,6 +20,7 @@ from .camera import LiveCamera
 from .clock import SimClock, check_speed, parse_instant
 from .default_scenario import default_scenario
 from .foxglove_io import FoxgloveLive, McapLog, Recorder
+from .outside import GazeboOut, SignalsIn
 from .render_worker import RenderJob, RenderWorker
 from .server import LiveServer
 from .twin import LiveTwin
@@ -45,7 +46,7 @@ def sensor_of(config: Path | None):
 def make_server(build: Path, sources: Path, scenario: Path | None = None, *, speed: float = 1.0,
                 start: str | None = None, bind: str = "127.0.0.1", port: int = 5555, sensor: Path | None = None,
                 render: bool = True, step_s: float = 1.0, record: Path | None = None,
-                foxglove: bool = True) -> LiveServer:
+                foxglove: bool = True, inputs: Path | None = None, gazebo: str | None = None) -> LiveServer:
     build, sources = Path(build), Path(sources)
     site = load_site(build, sources)
     zone = scene_zone(build) or site.zone
@@ -72,6 +73,13 @@ def make_server(build: Path, sources: Path, scenario: Path | None = None, *, spe
     except ValueError as e:
         raise UserError(sc.path, None, str(e)) from None
     clock = SimClock(sc.start.astimezone(zone) if zone else sc.start, speed)
+    signals_in = SignalsIn(inputs, twin.ports) if inputs else None
+    gazebo_out = None
+    if gazebo is not None:
+        try:
+            gazebo_out = GazeboOut(gazebo)
+        except FileNotFoundError as e:
+            raise UserError("--gazebo", None, str(e)) from None
     worker = None
     if render:
         worker = RenderWorker(RenderJob(str(build), str(sources), cam, sc.seed))
@@ -93,7 +101,8 @@ def make_server(build: Path, sources: Path, scenario: Path | None = None, *, spe
             "scene": {"build": str(build), "placements": len(site.placements),
                       "sensor": {"width": cam.width, "height": cam.height, "samples": cam.samples,
                                  "render_denoise": cam.render_denoise}}}
-    return LiveServer(twin, clock, bind=bind, port=port, worker=worker, info=info, recorder=recorder)
+    return LiveServer(twin, clock, bind=bind, port=port, worker=worker, info=info, recorder=recorder,
+                      inputs=signals_in, gazebo=gazebo_out)
 
 
 def versions() -> dict:

@@ -30,15 +30,18 @@ RECHECK_S = 0.25  # the ticker looks at the clock at least this often (paused, o
 
 class LiveServer:
     def __init__(self, twin: LiveTwin, clock: SimClock, *, bind: str = "127.0.0.1", port: int = 5555,
-                 worker: RenderWorker | None = None, info: dict | None = None, recorder=None):
+                 worker: RenderWorker | None = None, info: dict | None = None, recorder=None,
+                 inputs=None, gazebo=None):
         self.twin, self.clock, self.worker, self.recorder = twin, clock, worker, recorder
+        self.inputs, self.gazebo = inputs, gazebo  # outside.SignalsIn, outside.GazeboOut
         self.bind, self.port, self.info = bind, port, dict(info or {})
         self.seq = -1
         self.stop = asyncio.Event()
         self.wake = asyncio.Event()
         self.latency_ms: deque[float] = deque(maxlen=10000)  # step due -> published, clock-driven steps
         self.stats = {"steps": 0, "published": 0, "requests": 0, "bad_requests": 0, "undelivered_replies": 0,
-                      "renders": 0, "render_failures": 0, "ws_dropped": 0, "record_errors": 0}
+                      "renders": 0, "render_failures": 0, "ws_dropped": 0, "record_errors": 0,
+                      "gazebo_errors": 0}
         self.last_render_error = self.last_record_error = ""
         self.zmq: ZmqSockets | None = None
         self.ws: WebSocketFeed | None = None
@@ -64,6 +67,8 @@ class LiveServer:
             if ready is not None:
                 ready(self.endpoints)
             tasks = [asyncio.create_task(self._ticker()), asyncio.create_task(self._commands())]
+            if self.inputs is not None:
+                tasks.append(asyncio.create_task(self.inputs.run(self.apply_inputs)))
             await self.stop.wait()
             for t in tasks:
                 t.cancel()
@@ -77,6 +82,8 @@ class LiveServer:
                 await asyncio.to_thread(self.worker.close)
             if self.recorder is not None:
                 self.recorder.close()
+            if self.gazebo is not None:
+                await asyncio.to_thread(self.gazebo.close)
 
     # -- the clock
     def _due(self) -> int:
@@ -98,10 +105,18 @@ class LiveServer:
     def _publish(self, k: int, values: dict) -> None:
         self.seq += 1
         msg = protocol.published(self.seq, k, self.twin.instant(k), values)
+        if self.inputs is not None:
+            msg["stale"] = sorted(self.inputs.stale)
         self.zmq.publish(protocol.encode(msg))
         self.ws.publish(msg)
         if self.recorder is not None:
             self._record(self.recorder.state, self.twin, msg)
+        if self.gazebo is not None:
+            try:
+                self.gazebo.push(self.twin)
+            except Exception as e:  # noqa: BLE001 - the simulator's trouble, not the twin's
+                self.stats["gazebo_errors"] += 1
+                self.last_record_error = f"gazebo: {type(e).__name__}: {e}"
         self.stats["published"] += 1
 
     def _record(self, fn, *args) -> None:
@@ -164,8 +179,22 @@ class LiveServer:
         return {"ok": True, **self.hello()}
 
     def _cmd_get(self, req) -> dict:
-        return {"ok": True, "seq": self.seq, "sim_time": self.twin.instant().isoformat(),
-                "values": self.twin.get(req.get("ports"))}
+        reply = {"ok": True, "seq": self.seq, "sim_time": self.twin.instant().isoformat(),
+                 "values": self.twin.get(req.get("ports"))}
+        if self.inputs is not None:
+            reply["stale"] = sorted(self.inputs.stale)
+        return reply
+
+    def apply_inputs(self, values: dict) -> None:
+        """What the substation's signals changed (SignalsIn), applied as a `set` and
+        published at once; with no value, the change of what is stale is published."""
+        if values:
+            self.twin.set(values)
+            before = self.seq
+            self._advance(self.twin.engine.k, None)
+            if self.seq != before:
+                return
+        self._publish(self.twin.engine.k, {})
 
     def _cmd_set(self, req) -> dict:
         typed = self.twin.set(req["values"])
@@ -241,7 +270,9 @@ class LiveServer:
                  "step_latency_ms": {"p50": lat[0], "p99": lat[1], "n": len(self.latency_ms)} if lat else None,
                  "last_render_error": self.last_render_error, "last_record_error": self.last_record_error,
                  "render_process": {"pid": self.worker.pid, "load_s": self.worker.load_s,
-                                    "starts": self.worker.starts} if self.worker else None}
+                                    "starts": self.worker.starts} if self.worker else None,
+                 "inputs": self.inputs.status() if self.inputs is not None else None,
+                 "gazebo": self.gazebo.status() if self.gazebo is not None else None}
         return {"protocol": protocol.PROTOCOL, "versions": self.info.get("versions", {}),
                 "scene": {**self.info.get("scene", {}), "scenario": t.scenario.name, "step_s": t.scenario.step_s,
                           "seed": t.scenario.seed, "bindings": gauges(t), "switches": sorted(t.switches.values())},
