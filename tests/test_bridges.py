@@ -152,8 +152,9 @@ class IedProcess:
         self.proc = None
 
     def start(self) -> "IedProcess":
-        self.proc = subprocess.Popen([sys.executable, str(HERE / "iec61850_server.py"), str(IEC / "bay_ied.cfg"),
-                                      str(self.port)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        self.proc = subprocess.Popen([sys.executable, "-m", "pipeline.bridges.ied_sim", str(IEC / "bay_ied.cfg"),
+                                      str(self.port)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                     cwd=HERE.parent)
         assert self.proc.stdout.readline().strip() == "ready"
         return self
 

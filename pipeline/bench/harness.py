@@ -23,7 +23,7 @@ from .stats import machine
 
 
 def _sections(results: dict):
-    from . import blender_peer, builds, dataset, gazebo, gltf_transform, live, sections, viewer
+    from . import blender_peer, builds, dataset, gazebo, gltf_transform, live, live_io, sections, viewer
 
     return [
         ("build", builds.build_section),
@@ -36,6 +36,7 @@ def _sections(results: dict):
         ("render", sections.render_section),
         ("dataset", dataset.dataset_section),
         ("live", lambda ctx: live.live_section(ctx, results.get("dataset", {}).get("data"))),
+        ("live_io", live_io.live_io_section),
         ("blender", blender_peer.blender_section),
         ("blender_reexport", blender_peer.reexport_section),
         ("gltf_transform", gltf_transform.gltf_transform_section),

@@ -1,17 +1,18 @@
-"""A real IEC 61850 server for the tests (libiec61850 through pyiec61850-ng), on loopback.
+"""A real IEC 61850 server (libiec61850 through pyiec61850-ng) on loopback, for the tests
+and the bench: the IED end of `twin serve --inputs`.
 
-`python tests/iec61850_server.py MODEL.cfg PORT` prints "ready" once it listens, then
+`python -m pipeline.bridges.ied_sim MODEL.cfg PORT` prints "ready" once it listens, then
 takes commands on stdin, one per line, and answers "ok" to each:
     dbpos REF on|off|intermediate|bad      a double point's stVal (REF: LD/LN.DO.stVal)
     float REF VALUE                        a FLOAT32 attribute (REF: LD/LN.DO.mag.f)
     quality REF good|invalid|questionable  a quality attribute (REF: LD/LN.DO.q)
 It stops at the end of its stdin (or when killed: the tests kill it to take it away).
+MODEL.cfg is libiec61850's configuration-file model (tests/data/iec61850/bay_ied.cfg).
 """
 
-import sys
+from __future__ import annotations
 
-import pyiec61850.pyiec61850 as L
-from pyiec61850.server.server import IedServer
+import sys
 
 DBPOS = {"on": "DBPOS_ON", "off": "DBPOS_OFF", "intermediate": "DBPOS_INTERMEDIATE_STATE", "bad": "DBPOS_BAD_STATE"}
 VALIDITY = {"good": "QUALITY_VALIDITY_GOOD", "invalid": "QUALITY_VALIDITY_INVALID",
@@ -19,6 +20,9 @@ VALIDITY = {"good": "QUALITY_VALIDITY_GOOD", "invalid": "QUALITY_VALIDITY_INVALI
 
 
 def main() -> None:
+    import pyiec61850.pyiec61850 as L
+    from pyiec61850.server.server import IedServer
+
     server = IedServer(sys.argv[1])
     server.start(int(sys.argv[2]))
     print("ready", flush=True)
