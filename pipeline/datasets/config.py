@@ -50,7 +50,7 @@ class States:
 
 
 @dataclass(frozen=True)
-class Camera:
+class CameraFamily:
     """One camera family. inspection_point: `points` (site.toml names; all when empty)
     looking at their targets. route: a polyline `path` of plan (x, y) on `level`,
     `height` above it, looking at the nearest placement of `look_at` assets within
@@ -79,7 +79,7 @@ class DatasetConfig:
     sensor: Sensor
     conditions: Conditions
     states: States
-    cameras: tuple[Camera, ...]
+    cameras: tuple[CameraFamily, ...]
     digest: str = field(default="")  # sha256 of the file: what a resumed run must match
 
 
@@ -146,7 +146,7 @@ def _states(r: "_Reader", t: dict) -> States:
                   r.number(t, "states.switch_open", 0.0, lo=0.0, hi=1.0))
 
 
-def _camera(r: "_Reader", t: dict, key: str) -> Camera:
+def _camera(r: "_Reader", t: dict, key: str) -> CameraFamily:
     if not isinstance(t, dict):
         raise UserError(r.path, key, "a table")
     kind = t.get("kind")
@@ -158,7 +158,7 @@ def _camera(r: "_Reader", t: dict, key: str) -> Camera:
         points = t.get("points", [])
         if not isinstance(points, list) or not all(isinstance(p, str) for p in points):
             raise UserError(r.path, f"{key}.points", "a list of site.toml inspection point names")
-        return Camera(**common, points=tuple(points))
+        return CameraFamily(**common, points=tuple(points))
     if kind == "route":
         path = t.get("path")
         if (not isinstance(path, list) or len(path) < 2
@@ -167,7 +167,7 @@ def _camera(r: "_Reader", t: dict, key: str) -> Camera:
         look = t.get("look_at", [])
         if not isinstance(look, list) or not all(isinstance(a, str) for a in look):
             raise UserError(r.path, f"{key}.look_at", "a list of asset names")
-        return Camera(**common, path=tuple((float(x), float(y)) for x, y in path), level=r.text(t, f"{key}.level"),
+        return CameraFamily(**common, path=tuple((float(x), float(y)) for x, y in path), level=r.text(t, f"{key}.level"),
                       height=r.number(t, f"{key}.height", 1.6, lo=0.1, hi=50.0), look_at=tuple(look),
                       reach_m=r.number(t, f"{key}.reach_m", 30.0, lo=1.0))
     presets = t.get("presets")
@@ -180,7 +180,7 @@ def _camera(r: "_Reader", t: dict, key: str) -> Camera:
             raise UserError(r.path, pk, "a table {target = TAG, zoom = Z}")
         out.append((r.text(p, f"{pk}.target"),
                     r.number(p, f"{pk}.zoom", 1.0, lo=camera_model.ZOOM_MIN, hi=camera_model.ZOOM_MAX)))
-    return Camera(**common, mast=r.text(t, f"{key}.mast"), presets=tuple(out))
+    return CameraFamily(**common, mast=r.text(t, f"{key}.mast"), presets=tuple(out))
 
 
 def _is_number(v) -> bool:

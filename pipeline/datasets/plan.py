@@ -18,10 +18,10 @@ from .. import config
 from ..errors import UserError
 from ..runtime import camera as camera_model
 from .. import sun as sun_model
-from .config import Camera, DatasetConfig
+from .config import CameraFamily, DatasetConfig
 from ..perception.gauge_reader import dial_of
 from ..geometry.pinhole import cull, intrinsics, look_at
-from ..runtime.site import Shot, Site
+from ..runtime.site import Shot, BuiltSite
 
 MAST_EYE_ABOVE_TILT_M = 0.15  # the PTZ head's lens above its tilt axis
 
@@ -54,7 +54,7 @@ def frame_seed(cfg: DatasetConfig, index: int) -> int:
 class Planner:
     """Frames of one config on one site; the site's camera routes resolved once."""
 
-    def __init__(self, cfg: DatasetConfig, site: Site, sources: Path):
+    def __init__(self, cfg: DatasetConfig, site: BuiltSite, sources: Path):
         self.cfg, self.site = cfg, site
         self.weights = np.array([c.weight for c in cfg.cameras], float)
         if not self.weights.sum() > 0:
@@ -71,7 +71,7 @@ class Planner:
                            and site.manifests[p["asset"]].get("category") == "switchgear"]
 
     # -- checks against the site
-    def _check(self, c: Camera, key: str) -> None:
+    def _check(self, c: CameraFamily, key: str) -> None:
         tags = {p["tag"] for p in self.site.placements}
         for name in c.points:
             if name not in self.site.inspection:
@@ -85,7 +85,7 @@ class Planner:
                 if target not in tags:
                     raise UserError(self.cfg.path, f"{key}.presets[{j}].target", f"{target!r} is not a placement")
 
-    def _route(self, c: Camera, i: int, sources: Path) -> np.ndarray:
+    def _route(self, c: CameraFamily, i: int, sources: Path) -> np.ndarray:
         """(n, 3) ENU vertices of a route polyline, `height` above its level."""
         from ..georef import Georeferencer
 
@@ -145,7 +145,7 @@ class Planner:
         lo, hi = np.array(m["bounds"][0]), np.array(m["bounds"][1])
         return (self.site.pose(p) @ np.r_[(lo + hi) / 2, 1.0])[:3]
 
-    def _pose(self, cam: Camera, ci: int, rng: np.random.Generator) -> tuple[np.ndarray, str, str, float | None]:
+    def _pose(self, cam: CameraFamily, ci: int, rng: np.random.Generator) -> tuple[np.ndarray, str, str, float | None]:
         """(camera pose, target tag or "", the camera's name in the labels, the preset's
         zoom for a PTZ camera)."""
         if cam.kind == "inspection_point":

@@ -36,7 +36,7 @@ from .plan import FramePlan, Planner, frame_id, switch_angles
 from ..perception.gauge_reader import dial_of
 from ..geometry.pinhole import intrinsics
 from ..render.sensor import PhoneCamera
-from ..runtime.site import Site, load_site
+from ..runtime.site import BuiltSite, load_site
 
 RENDERER = "blender-cycles-cpu"
 FramePool = Callable[[int, int], ContextManager[Executor]]  # (workers, frames a worker renders before it goes)
@@ -118,7 +118,7 @@ def _done(folder: Path, index: int) -> bool:
                                                 f"depth/{fid}.npy"))
 
 
-def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
+def _assemble(folder: Path, cfg, site: BuiltSite, n: int) -> None:
     records = [json.loads((folder / "records" / f"{frame_id(i)}.json").read_text()) for i in range(n)]
     lines = [json.dumps({k: v for k, v in r.items() if k != "annotations"}, sort_keys=True,
                         separators=(",", ":")) for r in records]

@@ -17,9 +17,9 @@ from .cycles import CyclesScene
 from ..perception.gauge import POINTER, gauge_box, pointer_angle
 from ..geometry.pinhole import cull, intrinsics
 from .sensor import PhoneCamera, develop, frame_seed, lens_glare, metered_gain, metered_white_balance
-from ..runtime.site import Shot, Site
+from ..runtime.site import Shot, BuiltSite
 
-def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, pointer_binding: dict | None) -> dict:
+def frame_labels(shot: Shot, k: dict, site: BuiltSite, gain: float, veil: float, pointer_binding: dict | None) -> dict:
     """Labels of one frame: what was rendered, in numbers."""
     pose = shot.cam_pose
     target_pose = site.pose(site.placement(shot.target))
@@ -63,12 +63,12 @@ def write_json(path: Path, data) -> None:
 
 
 
-def pointer_binding(site: Site, tag: str) -> dict | None:
+def pointer_binding(site: BuiltSite, tag: str) -> dict | None:
     m = site.manifests.get(site.placement(tag)["asset"], {})
     return next((b for b in m.get("bindings", []) if b["target"] == POINTER and b["effect"] == "rotate"), None)
 
 
-def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamera, seed: int,
+def render_shots(site: BuiltSite, shots: list[Shot], folder: Path, *, cam: PhoneCamera, seed: int,
                  gain: float | None = None, names: list[str] | None = None, meter_each: bool = False) -> list[dict]:
     """Render shots into folder/<name>.png + <name>.json; one scene (loaded once, kept
     between frames), exposure locked at the first shot unless `gain` is given or
@@ -90,7 +90,7 @@ def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamer
         bl.close()
 
 
-def populate(bl: CyclesScene, site: Site, shots: list[Shot]) -> None:
+def populate(bl: CyclesScene, site: BuiltSite, shots: list[Shot]) -> None:
     """Load what any shot's camera sees or what shadows into it, the targets at least,
     and the lighting poles near the targets as lamps."""
     spheres = site.spheres()
@@ -134,7 +134,7 @@ def develop_shot(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCame
     return rgb, gain, wb, float(veil.mean())
 
 
-def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
+def _one(bl: CyclesScene, site: BuiltSite, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
     """One frame; `lock` = (gain, white balance) of a locked exposure, or None to meter."""
     binding = pointer_binding(site, shot.target)
     bl.set_shot(shot, binding)

@@ -11,9 +11,9 @@ from .frames import render_shots, write_json
 from ..perception.gauge import dial_world
 from ..geometry.pinhole import look_at
 from .sensor import PhoneCamera
-from ..runtime.site import Shot, Site, load_site
+from ..runtime.site import Shot, BuiltSite, load_site
 
-def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[object, list[Shot]]:
+def scenario_shots(scenario_path: Path, site: BuiltSite, every: int = 1) -> tuple[object, list[Shot]]:
     """Run the scenario's graph and turn each (every-th) step into a Shot: camera at the
     inspection point whose target is the placement the render node drives, looking at
     its main-tank gauge; zoom, sun and states from the graph's nodes."""

@@ -20,7 +20,7 @@ from .frames import render_shots, write_json
 from ..perception.gauge import FACE_RADIUS, dial_outline, dial_world
 from ..geometry.pinhole import intrinsics, look_at, project
 from .sensor import PhoneCamera
-from ..runtime.site import Shot, Site, load_site
+from ..runtime.site import Shot, BuiltSite, load_site
 
 CONFIG = "study.toml"  # in the sources folder
 NOON = "solar_noon"  # a condition's time: the site's solar noon on its date
@@ -105,7 +105,7 @@ def _hhmm(text: str) -> dt.time | None:
         return None
 
 
-def study_times(site: Site, cfg: StudyConfig) -> list[tuple[str, dt.datetime]]:
+def study_times(site: BuiltSite, cfg: StudyConfig) -> list[tuple[str, dt.datetime]]:
     import astral
     import astral.sun
 
@@ -147,7 +147,7 @@ def _ray_hits_box(origin: np.ndarray, direction: np.ndarray, length: float, pose
     return True
 
 
-def _blocked(site: Site, origin: np.ndarray, direction: np.ndarray, length: float, skip: str = "") -> bool:
+def _blocked(site: BuiltSite, origin: np.ndarray, direction: np.ndarray, length: float, skip: str = "") -> bool:
     """Does a built placement's bounding box (other than `skip`) cut the segment?"""
     for p in site.placements:
         m = site.manifests.get(p["asset"])
@@ -161,7 +161,7 @@ def _blocked(site: Site, origin: np.ndarray, direction: np.ndarray, length: floa
     return False
 
 
-def study_viewpoint(site: Site, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray:
+def study_viewpoint(site: BuiltSite, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray:
     """The study's camera pose: cfg.distance_m from the target's main-tank dial, at a
     phone's height (1.6 m above the reactor's level), turned from the dial's normal
     towards `sun` (the sun of cfg.faces_sun_of) as far as cfg.max_obliquity allows, so
@@ -188,7 +188,7 @@ def study_viewpoint(site: Site, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray
     return look_at(best[3], centre)
 
 
-def study_shots(site: Site, cfg: StudyConfig, *,
+def study_shots(site: BuiltSite, cfg: StudyConfig, *,
                 tau_atm: float = sun_model.DEFAULT_TAU_ATM) -> list[tuple[str, Shot]]:
     """The study's shots (PAPER_NOTES.md): same camera, one instant per condition; the
     tank level follows the study's leak trace over the sequence so H has something to
@@ -231,7 +231,7 @@ def study_roi(record: dict) -> tuple[int, int, int, int]:
     return int(math.floor(x0)), int(math.floor(y0)), int(math.ceil(x1)), int(math.ceil(y1))
 
 
-def face_only(bgr_crop: np.ndarray, site: Site, shot: Shot, cam: PhoneCamera, offset) -> np.ndarray:
+def face_only(bgr_crop: np.ndarray, site: BuiltSite, shot: Shot, cam: PhoneCamera, offset) -> np.ndarray:
     """The crop with everything outside the projected dial face set to a neutral grey
     (neither red, white nor dark for the H masks)."""
     import cv2
