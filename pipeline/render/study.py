@@ -40,61 +40,32 @@ class StudyConfig:
     conditions: tuple[tuple[str, str], ...]  # (name, "HH:MM" or NOON), in the sequence's order
 
 
-_KEYS = {"target", "zoom", "distance_m", "max_obliquity_deg", "faces_sun_of", "seed", "conditions"}
-
-
 def load_study(path: Path) -> StudyConfig:
-    """Read and check a study.toml (SOURCES/study.toml); a UserError names the file
-    and the key."""
-    from ..errors import UserError
+    """Read a study.toml (SOURCES/study.toml) against schemas/study.schema.json, then
+    check what a schema cannot say; every problem at once, in one UserError naming
+    the file and each key."""
+    from ..errors import raise_all
 
     path = Path(path)
-    data = config.read_toml(path)
-    unknown = sorted(set(data) - _KEYS)
-    if unknown:
-        raise UserError(path, unknown[0], f"unknown key (known: {', '.join(sorted(_KEYS))})")
-
-    def number(key: str, lo: float, hi: float) -> float:
-        v = data.get(key)
-        if v is None:
-            raise UserError(path, key, "missing")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
-            raise UserError(path, key, f"{v!r}: a number in [{lo:g}, {hi:g}] is expected")
-        return float(v)
-
-    target = data.get("target")
-    if not isinstance(target, str) or not target:
-        raise UserError(path, "target", "missing: the tag of the placement whose gauge is read" if target is None
-                        else f"{target!r}: a placement's tag (text) is expected")
-    seed = data.get("seed")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise UserError(path, "seed", f"{seed!r}: a whole number >= 0 is expected")
-    conditions = _conditions(path, data.get("conditions"))
-    faces = data.get("faces_sun_of")
-    if faces not in dict(conditions):
-        raise UserError(path, "faces_sun_of", f"{faces!r}: the name of one of the conditions is expected")
-    return StudyConfig(path, target, number("zoom", camera_model.ZOOM_MIN, camera_model.ZOOM_MAX),
-                       number("distance_m", 1.0, 1000.0), math.radians(number("max_obliquity_deg", 0.0, 89.0)),
-                       faces, seed, conditions)
+    data = config.read_config(path, "study")
+    conditions = tuple((c["name"], c["time"]) for c in data["conditions"])
+    raise_all(path, _problems(data, conditions))
+    return StudyConfig(path, data["target"], float(data["zoom"]), float(data["distance_m"]),
+                       math.radians(data["max_obliquity_deg"]), data["faces_sun_of"], data["seed"], conditions)
 
 
-def _conditions(path: Path, raw) -> tuple[tuple[str, str], ...]:
-    from ..errors import UserError
-
-    if not isinstance(raw, list) or not raw:
-        raise UserError(path, "conditions", "missing: one [[conditions]] table per condition (name, time)")
-    out = []
-    for i, c in enumerate(raw):
-        key = f"conditions[{i}]"
-        if not isinstance(c, dict) or set(c) != {"name", "time"}:
-            raise UserError(path, key, "a table with exactly the keys name and time is expected")
-        name, time = c["name"], c["time"]
-        if not isinstance(name, str) or not name or name in dict(out):
-            raise UserError(path, f"{key}.name", f"{name!r}: a name used by no other condition is expected")
-        if time != NOON and not (isinstance(time, str) and _hhmm(time) is not None):
-            raise UserError(path, f"{key}.time", f"{time!r}: a local time \"HH:MM\" or \"{NOON}\" is expected")
-        out.append((name, time))
-    return tuple(out)
+def _problems(data: dict, conditions: tuple[tuple[str, str], ...]) -> list[tuple[str, str]]:
+    """Condition names used once, real times, faces_sun_of one of the conditions."""
+    out, names = [], set()
+    for i, (name, time) in enumerate(conditions):
+        if name in names:
+            out.append((f"conditions[{i}].name", f"{name!r}: a name used by no other condition is expected"))
+        names.add(name)
+        if time != NOON and _hhmm(time) is None:
+            out.append((f"conditions[{i}].time", f"{time!r}: a local time \"HH:MM\" or \"{NOON}\" is expected"))
+    if data["faces_sun_of"] not in names:
+        out.append(("faces_sun_of", f"{data['faces_sun_of']!r}: the name of one of the conditions is expected"))
+    return out
 
 
 def _hhmm(text: str) -> dt.time | None:
