@@ -19,7 +19,7 @@ from ..errors import UserError
 from ..runtime import camera as camera_model
 from .. import sun as sun_model
 from .config import CameraFamily, DatasetConfig
-from ..perception.gauge_reader import dial_of
+from ..perception.gauge import dial_of
 from ..geometry.pinhole import cull, intrinsics, look_at
 from ..runtime.site import Shot, BuiltSite
 

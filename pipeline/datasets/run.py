@@ -33,7 +33,7 @@ from ..errors import UserError
 from ..files import atomic_path, atomic_write
 from . import config as dataset_config, labels
 from .plan import FramePlan, Planner, frame_id, switch_angles
-from ..perception.gauge_reader import dial_of
+from ..perception.gauge import dial_of
 from ..geometry.pinhole import intrinsics
 from ..render.sensor import PhoneCamera
 from ..runtime.site import BuiltSite, load_site
@@ -277,7 +277,7 @@ def _context(job: dict) -> dict:
 
 
 def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
-    from ..render.frames import develop_shot, pointer_binding
+    from ..render.frames import develop_shot
 
     site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
     scene.scene.cycles.seed = plan.seed
@@ -286,7 +286,7 @@ def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
         if tag in scene.objects:
             m = site.manifests[site.placement(tag)["asset"]]
             scene.set_joints(tag, m, switch_angles(m, position))
-    scene.set_shot(shot, pointer_binding(site, shot.target) if shot.target else None)
+    scene.set_shot(shot)
     scene.set_sky(plan.aerosol)
     linear = scene.render()
     rgb, gain, wb, veil = develop_shot(scene, shot, linear, cam, None, plan.seed)

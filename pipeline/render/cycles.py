@@ -217,7 +217,7 @@ class CyclesScene:
                     self.lamps.append(ob)
 
     # -- per frame
-    def set_shot(self, shot: Shot, pointer_binding: dict | None) -> None:
+    def set_shot(self, shot: Shot) -> None:
         bpy = self.bpy
         cam = self.camera
         cam.matrix_world = _matrix(bpy, shot.cam_pose)

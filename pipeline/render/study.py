@@ -17,7 +17,7 @@ from ..runtime import camera as camera_model
 from .. import sun as sun_model
 from ..perception.metrics import measure
 from .frames import render_shots, write_json
-from ..perception.gauge import FACE_RADIUS, dial_outline, dial_world
+from ..perception.gauge import placed_dial
 from ..geometry.pinhole import intrinsics, look_at, project
 from .sensor import PhoneCamera
 from ..runtime.site import Shot, BuiltSite, load_site
@@ -140,7 +140,8 @@ def study_viewpoint(site: BuiltSite, sun: np.ndarray, cfg: StudyConfig) -> np.nd
     line of sight to the dial and the sun itself stay clear of the built models' bounding
     boxes (a sun hidden behind the reactor would make no glare)."""
     p = site.placement(cfg.target)
-    centre, normal = dial_world(site.pose(p))
+    dial = placed_dial(site, cfg.target)
+    centre, normal = dial.centre, dial.axis
     candidates = []
     for a in np.linspace(-cfg.max_obliquity, cfg.max_obliquity, 91):
         c, s = math.cos(a), math.sin(a)
@@ -169,6 +170,8 @@ def study_shots(site: BuiltSite, cfg: StudyConfig, *,
     if not any(p["tag"] == cfg.target for p in site.placements) \
             or site.placement(cfg.target)["asset"] not in site.manifests:
         raise UserError(cfg.path, "target", f"{cfg.target!r} is not a built placement of {site.build}")
+    if placed_dial(site, cfg.target) is None:
+        raise UserError(cfg.path, "target", f"{cfg.target!r} has no gauge (no binding turns its pointer)")
     times = study_times(site, cfg)
     lat, lon = site.origin[0], site.origin[1]
     suns = []
@@ -208,7 +211,8 @@ def face_only(bgr_crop: np.ndarray, site: BuiltSite, shot: Shot, cam: PhoneCamer
     import cv2
 
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
-    uv = project(dial_outline(site.pose(site.placement(shot.target)), 64, FACE_RADIUS * 0.97), shot.cam_pose, k)
+    dial = placed_dial(site, shot.target)
+    uv = project(dial.circle(dial.face_radius * 0.97, 64), shot.cam_pose, k)
     poly = np.round(uv - np.asarray(offset, float)).astype(np.int32)
     mask = np.zeros(bgr_crop.shape[:2], np.uint8)
     cv2.fillPoly(mask, [poly], 1)
