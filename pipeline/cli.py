@@ -31,7 +31,8 @@ def user_errors(fn):
         try:
             return fn(*args, **kwargs)
         except UserError as e:
-            click.echo(f"error: {e}", err=True)
+            for line in str(e).splitlines():  # a config's every problem, one line each
+                click.echo(f"error: {line}", err=True)
             sys.exit(1)
 
     return wrapper

@@ -12,6 +12,7 @@ checks again on content they already passed.
 
 from __future__ import annotations
 
+import copy
 import datetime as dt
 import json
 import math
@@ -23,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from .digest import sha256_json
-from .errors import UserError, read_input
+from .errors import UserError, raise_all, read_input
 
 SCHEMA_DIR = Path(__file__).resolve().parent.parent / "schemas"
 
@@ -42,6 +43,19 @@ def read_toml(path: Path) -> dict:
         raise UserError(path, None, "not UTF-8 text") from None
     except tomllib.TOMLDecodeError as e:
         raise UserError(path, None, f"TOML syntax error: {e}") from None
+
+
+def read_config(path: Path, schema_name: str) -> dict:
+    """A TOML config checked against schemas/<schema_name>.schema.json, with the
+    schema's defaults filled in: every violation and every number that is not finite,
+    at once, in one UserError (each naming its key). What a schema cannot say (an
+    order, a real date, a name another key must use) the caller checks after."""
+    path = Path(path)
+    data = read_toml(path)
+    problems = schema_problems(data, schema_name)
+    problems += [(key, "not a finite number") for key, value in _numbers(data) if not math.isfinite(value)]
+    raise_all(path, problems)
+    return _defaults(schema(schema_name), data)
 
 
 def _key_path(error) -> str:
@@ -71,29 +85,45 @@ class PassedChecks:
 
 
 def validate(data: dict, schema_name: str, path: Path, passed: PassedChecks | None = None) -> None:
-    """Raise one UserError for the first schema violation, naming the key. `passed`:
-    see the module's docstring."""
+    """Raise one UserError holding every schema violation, each naming its key, in
+    key order. `passed`: see the module's docstring."""
     key = sha256_json(["schema", schema(schema_name), data]) if passed is not None else None
     if key is not None and key in passed:
         return
+    problems = schema_problems(data, schema_name)
+    raise_all(path, problems)
+    if key is not None:
+        passed.add(key)
+
+
+def schema_problems(data: dict, schema_name: str) -> list[tuple[str, str]]:
+    """(key, what is wrong) of every violation of schemas/<schema_name>.schema.json."""
     import jsonschema
 
     validator = jsonschema.Draft202012Validator(schema(schema_name))
     errors = sorted(validator.iter_errors(data), key=lambda e: (list(map(str, e.absolute_path)), e.message))
-    if not errors:
-        if key is not None:
-            passed.add(key)
-        return
-    e = errors[0]
+    return list(dict.fromkeys(p for e in errors for p in _problems(e)))
+
+
+def _problems(e) -> list[tuple[str, str]]:
+    """A jsonschema.ValidationError as (key, message) problems: a missing or unknown
+    key is named itself; of alternatives (anyOf: a number or a pair), the violation
+    of the one whose type the value has."""
+    where = _key_path(e)
+    within = (lambda k: k) if where == "(top level)" else (lambda k: f"{where}.{k}")
     if e.validator == "required":
         missing = e.message.split("'")[1] if "'" in e.message else e.message
-        where = _key_path(e)
-        key = missing if where == "(top level)" else f"{where}.{missing}"
         described = e.schema.get("properties", {}).get(missing, {}).get("description")
-        raise UserError(path, key, "missing required key" + (f" ({described})" if described else ""))
+        return [(within(missing), "missing required key" + (f" ({described})" if described else ""))]
     if e.validator == "additionalProperties":
-        raise UserError(path, _key_path(e), f"unknown key: {e.message}")
-    raise UserError(path, _key_path(e), e.message)
+        known = e.schema.get("properties", {})
+        return [(within(k), f"unknown key (known: {', '.join(sorted(known))})") for k in sorted(e.instance)
+                if k not in known]
+    typed = [c for c in e.context or () if c.validator != "type"]
+    if typed:
+        return [p for c in typed for p in _problems(c)]
+    described = e.schema.get("description") if e.validator == "pattern" else None  # a regex says little
+    return [(where, e.message + (f" ({described})" if described else ""))]
 
 
 def _defaults(node_schema: dict, data: Any) -> Any:
@@ -101,7 +131,7 @@ def _defaults(node_schema: dict, data: Any) -> Any:
     if node_schema.get("type") == "object" and isinstance(data, dict):
         for key, sub in node_schema.get("properties", {}).items():
             if key not in data and "default" in sub:
-                data[key] = sub["default"]
+                data[key] = copy.deepcopy(sub["default"])  # never the cached schema's own object
             if key in data:
                 data[key] = _defaults(sub, data[key])
     elif node_schema.get("type") == "array" and isinstance(data, list) and "items" in node_schema:

@@ -130,6 +130,31 @@ def test_no_module_over_600_lines():
     assert not long, f"over {MAX_LINES} lines: {long}"
 
 
+
+MAX_ENGINE_FUNCTION = 60
+
+
+def long_functions(folder: Path, limit: int) -> dict[str, int]:
+    """{module:function: lines} of every function (methods and nested ones too) in
+    `folder` longer than `limit` lines, docstring and comments included."""
+    out = {}
+    for path in sorted(folder.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = node.end_lineno - node.lineno + 1
+                if n > limit:
+                    out[f"{path.relative_to(folder)}:{node.name}"] = n
+    return out
+
+
+def test_no_engine_function_over_60_lines(tmp_path):
+    """The engine stays readable step by step: no function in engine/ over 60 lines."""
+    long = long_functions(PIPELINE / "engine", MAX_ENGINE_FUNCTION)
+    assert not long, f"over {MAX_ENGINE_FUNCTION} lines: {long}"
+    (tmp_path / "m.py").write_text("def f():\n" + "    x = 1\n" * 60 + "\n\ndef g():\n    pass\n")
+    assert long_functions(tmp_path, MAX_ENGINE_FUNCTION) == {"m.py:f": 61}  # the check sees one
+
+
 # --- modules, the engine, perception ---------------------------------------------
 
 # What the engine may import: the modules that know no domain (errors, files, digests,

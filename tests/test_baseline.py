@@ -17,7 +17,7 @@ import pytest
 
 from pipeline.perception import gauge_reader as bl
 from pipeline.perception.baseline import BINS, bin_of, write_report
-from pipeline.perception.gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
+from pipeline.perception.gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, dial_of, pointer_angle
 from pipeline.geometry.pinhole import intrinsics, look_at, project
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -36,7 +36,7 @@ def _view(px_across: float, oblique_deg: float = 0.0, dist: float = 5.0):
     place = np.eye(4)
     place[:2, :2] = [[math.cos(0.4), -math.sin(0.4)], [math.sin(0.4), math.cos(0.4)]]
     place[:3, 3] = (30.0, 180.0, 12.0)
-    dial = bl.dial_of(place, MANIFEST)
+    dial = dial_of(place, MANIFEST)
     a = math.radians(oblique_deg)
     side = np.cross(dial.axis, (0.0, 0.0, 1.0))
     pose = look_at(dial.centre + dist * (math.cos(a) * dial.axis + math.sin(a) * side), dial.centre)

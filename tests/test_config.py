@@ -3,11 +3,14 @@
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 
 from pipeline import config
 from pipeline.errors import UserError
+
+ROOT = Path(__file__).resolve().parents[1]
 
 GOOD_SITE = """
 [site]
@@ -48,7 +51,7 @@ def test_good_site_loads_with_defaults(tmp_path):
     (lambda s: s.replace("EPSG:31984", "EPSG:999999"), "plan.crs", "unknown CRS"),
     (lambda s: s.replace("EPSG:31984", "EPSG:4326"), "plan.crs", "not a projected CRS"),
     (lambda s: s.replace('level = "L1"', 'level = "L9"'), "inspection_points[0].level", "not defined"),
-    (lambda s: s.replace("[site]", "[site]\nbogus = 1"), "site", "unknown key"),
+    (lambda s: s.replace("[site]", "[site]\nbogus = 1"), "site.bogus", "unknown key"),
     (lambda s: s.replace("elevation = 48.0", "elevation = nan"), "levels[0].elevation", "finite"),
 ])
 def test_site_errors_name_file_and_key(tmp_path, mutate, key, words):
@@ -131,3 +134,84 @@ def test_cli_info_counts_the_assets_it_reads_on_stderr(tmp_path):
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
     assert re.search(r"reading\s.*\s2/2\s", proc.stderr), proc.stderr  # kiosk and pole
     assert "2/2" not in proc.stdout and "kiosk" in proc.stdout
+
+
+# --- every config's problems at once, in site.toml's form --------------------------------
+
+def _problems(error: UserError, path) -> list[tuple[str, str]]:
+    """The (key, message) of each problem one UserError holds, checked against its text:
+    one `file: key: message` line each."""
+    problems = [(error.obj, error.message), *error.more]
+    assert str(error).splitlines() == [f"{path}: {k}: {m}" for k, m in problems]
+    assert error.file == str(path)
+    return problems
+
+
+def test_a_bad_site_toml_gives_every_problem_at_once(tmp_path):
+    text = GOOD_SITE.replace("grid_rotation_deg = 23.0", 'grid_rotation_deg = "23"').replace("[site]", "[site]\nbogus = 1")
+    path = write(tmp_path, text.replace('crs = "EPSG:31984"\n', ""))
+    with pytest.raises(UserError) as e:
+        config.load_site(path)
+    keys = [k for k, _ in _problems(e.value, path)]
+    assert keys == ["plan.crs", "plan.grid_rotation_deg", "site.bogus"]
+
+
+def test_a_bad_dataset_config_gives_every_problem_at_once(tmp_path):
+    from pipeline.datasets import config as dataset_config
+
+    good = (ROOT / "sources" / "datasets" / "inspection_route.toml").read_text()
+    bad = (good.replace("count = 240", "count = 0").replace("height = 480", "height = 480\nheigth = 4")
+           .replace('level = "L1"\npath = [[4.0, 199.8]', 'path = [[4.0, 199.8]')  # cameras[0] loses its level
+           .replace("zoom = [1.0, 8.0]", "zoom = [8.0, 1.0]")  # cameras[2]: out of order, for the code after
+           .replace('dates = ["2025-03-20"', 'dates = ["2025-02-30"'))
+    path = tmp_path / "bad.toml"
+    path.write_text(bad)
+    with pytest.raises(UserError) as e:
+        dataset_config.load(path)
+    schema = dict(_problems(e.value, path))
+    assert list(schema) == ["cameras[0].level", "dataset.count", "sensor.heigth"]
+    assert "missing required key" in schema["cameras[0].level"] and "unknown key" in schema["sensor.heigth"]
+    # the schema's problems come first; what only code can check is reported once they are fixed
+    path.write_text(bad.replace("count = 0", "count = 240").replace("\nheigth = 4", "")
+                    .replace('path = [[4.0, 199.8]', 'level = "L1"\npath = [[4.0, 199.8]'))
+    with pytest.raises(UserError) as e:
+        dataset_config.load(path)
+    assert [k for k, _ in _problems(e.value, path)] == ["conditions.dates[0]", "cameras[2].zoom"]
+
+
+def test_a_bad_study_toml_gives_every_problem_at_once(tmp_path):
+    from pipeline.render import study
+
+    good = (ROOT / "sources" / "study.toml").read_text()
+    path = tmp_path / "study.toml"
+    path.write_text(good.replace("zoom = 45.0", "zoom = 450.0").replace("seed = 20250920", "seed = -1")
+                    .replace('target = "RE-B3"', ""))
+    with pytest.raises(UserError) as e:
+        study.load_study(path)
+    assert [k for k, _ in _problems(e.value, path)] == ["target", "seed", "zoom"]
+    path.write_text(good.replace('name = "midnight"', 'name = "solar_noon"').replace('time = "17:05"', 'time = "25:05"')
+                    .replace('faces_sun_of = "late_afternoon"', 'faces_sun_of = "dusk"'))
+    with pytest.raises(UserError) as e:
+        study.load_study(path)
+    assert [k for k, _ in _problems(e.value, path)] == ["conditions[2].time", "conditions[4].name", "faces_sun_of"]
+
+
+def test_a_bad_scenario_gives_every_problem_at_once(tmp_path):
+    from pipeline.runtime import graph
+
+    path = tmp_path / "s.toml"
+    path.write_text('[scenario]\nname = "../x"\nseed = -1\nduration_s = 10.0\nstart = "2025-03-20T09:00:00Z"\n'
+                    '[[nodes]]\nid = "a"\ntype = "clock"\ncolour = 1\n')
+    with pytest.raises(UserError) as e:
+        graph.load_scenario(path)
+    assert [k for k, _ in _problems(e.value, path)] == ["nodes[0].colour", "scenario.step_s", "scenario.name",
+                                                        "scenario.seed"]
+
+
+def test_the_config_schemas_hold_the_camera_models_zoom_range():
+    from pipeline.runtime.camera import ZOOM_MAX, ZOOM_MIN
+
+    cams = config.schema("dataset")["properties"]["cameras"]["items"]["properties"]
+    zooms = [config.schema("study")["properties"]["zoom"], cams["presets"]["items"]["properties"]["zoom"],
+             *cams["zoom"]["anyOf"][:1], cams["zoom"]["anyOf"][1]["items"]]
+    assert {(z["minimum"], z["maximum"]) for z in zooms} == {(ZOOM_MIN, ZOOM_MAX)}

@@ -87,7 +87,7 @@ def _files(folder: Path) -> dict[str, bytes]:
     (lambda t: t.replace('kind = "ptz"', 'kind = "drone"'), "cameras[1].kind"),
     (lambda t: t.replace("zoom = [1.0, 6.0]", "zoom = [6.0, 1.0]"), "cameras[0].zoom"),
     (lambda t: t.replace('local_time = ["06:00", "18:30"]', 'local_time = ["6 am", "18:30"]'),
-     "conditions.local_time"),
+     "conditions.local_time[0]"),
     (lambda t: t.replace("switch_open = 0.5", "switch_open = 2"), "states.switch_open"),
     (lambda t: t.replace('dates = ["2025-03-20", "2025-06-21"]', 'dates = ["2025-02-30"]'), "conditions.dates[0]"),
 ])

@@ -9,7 +9,7 @@ import trimesh
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.geometry import clean as C
-from pipeline.geometry import collision, metrics, transform as T, uv
+from pipeline.geometry import collision, metrics, transform as T
 
 
 def box(offset=0.0):
@@ -189,19 +189,6 @@ def test_hull_per_part_caps_count():
     f = np.concatenate([p[1] + 8 * i for i, p in enumerate(parts)])
     out = collision.collision_step(collision.CollisionOptions("hull_per_part", max_parts=16))(_asset(ir.Visual("a", "m", (ir.Mesh(v, f),))))
     assert len(out.links[0].collisions) == 16
-
-
-def test_uv_rule_and_unwrap():
-    s = trimesh.creation.icosphere(subdivisions=2)
-    a = _asset(ir.Visual("s", "steel", (ir.Mesh(s.vertices, s.faces),)), ir.Visual("t", "paint", (ir.Mesh(s.vertices, s.faces),)))
-    assert uv.uv_step()(a).links[0].visuals[0].mesh.uvs is None
-    out = uv.uv_step(uv.UvOptions(materials=("paint",)))(a)
-    m = out.links[0].visuals[1].mesh
-    assert out.links[0].visuals[0].mesh.uvs is None and m.uvs is not None
-    assert m.uvs.min() >= 0 and m.uvs.max() <= 1 and m.triangle_count == len(s.faces)
-    v, f, uvs, vmap = uv.unwrap(s.vertices, s.faces)
-    np.testing.assert_array_equal(v, s.vertices[vmap])
-    assert volume(v, f) > 0  # winding kept
 
 
 def test_surface_distance_exact_beside_crowding_parts():

@@ -140,7 +140,7 @@ def test_levels_side_by_side_are_the_levels_one_after_the_other(monkeypatch, bud
     mesh = C.clean_mesh(ir.Mesh(v, f))
     alone = S.simplify_levels(mesh.vertices, mesh.faces, budgets)
     spread = []
-    workers = S.Workers(cores=2, spread=lambda parts: spread.append(len(parts)) or fork_join.spread(parts))
+    workers = S.Parallelism(cores=2, spread=lambda parts: spread.append(len(parts)) or fork_join.spread(parts))
     monkeypatch.setenv(fork_join.SHARE_VARIABLE, "2")  # fork_join.spread forks only with a core to spare
     side_by_side = S.simplify_levels(mesh.vertices, mesh.faces, budgets, workers=workers)
     assert spread == [len(budgets)]  # it did run side by side, a process per level

@@ -24,14 +24,53 @@ def test_projection_matches_intrinsics():
 
 
 def test_gauge_box_surrounds_dial_centre():
-    model = np.eye(4)
-    centre = gauge.DIAL_CENTER
-    pose = pinhole.look_at(centre + (0.0, -25.0, 0.0), centre)
+    # the reactor's pointer binding, as its manifest records it (float32 rest pose)
+    rest = [1.0, 0.0, 0.0, 0.0, 0.0, -4.4e-08, -1.0, -1.8, 0.0, 1.0, -4.4e-08, 2.8, 0.0, 0.0, 0.0, 1.0]
+    manifest = {"bindings": [{"target": gauge.POINTER, "effect": "rotate", "link": "base", "axis": [0.0, 0.0, 1.0],
+                              "domain": [0.0, 100.0], "range": [-2.356, 2.356], "rest_pose": rest}],
+                "links": [{"name": "base", "pose": np.eye(4).reshape(16).tolist()}]}
+    dial = gauge.dial_of(np.eye(4), manifest)
+    np.testing.assert_allclose(dial.centre, (0.0, -1.8, 2.8))
+    np.testing.assert_allclose(dial.axis, (0.0, -1.0, 0.0), atol=1e-7)  # the face looks out along -Y
+    pose = pinhole.look_at(dial.centre + (0.0, -25.0, 0.0), dial.centre)
     k = pinhole.intrinsics(1.047 / 45, 320, 240)
-    g = gauge.gauge_box(model, pose, k)
+    g = dial.box(pose, k)
     x0, y0, x1, y1 = g["box"]
     assert g["inside_frame"] and x0 < 160 < x1 and y0 < 120 < y1
     assert x1 - x0 == pytest.approx(2 * gauge.DIAL_RADIUS * k["fx"] / 25.0, rel=0.01)
+    assert gauge.dial_of(np.eye(4), {"bindings": []}) is None
+
+
+def test_a_frames_gauge_label_is_its_targets_own_dial():
+    """The frame labels box the dial the target's binding places (a transformer's dial
+    is not where a reactor's is) and give the pointer angle through the binding's own
+    mapping (ir.StateBinding.output)."""
+    import datetime as dt
+
+    from pipeline.render.frames import frame_labels
+    from pipeline.runtime.camera import lens
+    from pipeline.runtime.nodes import state_binding
+    from pipeline.runtime.site import BuiltSite, Shot
+
+    # the power transformer's pointer binding, as its manifest records it
+    rest = [1.0, 0.0, 0.0, 2.0, 0.0, -4.4e-08, -1.0, -3.05, 0.0, 1.0, -4.4e-08, 3.0, 0.0, 0.0, 0.0, 1.0]
+    binding = {"target": gauge.POINTER, "effect": "rotate", "link": "base", "axis": [0.0, 0.0, 1.0],
+               "variable": "oil_level_tank", "domain": [0.0, 100.0], "range": [-2.356, 2.356], "rest_pose": rest}
+    manifest = {"bindings": [binding], "links": [{"name": "base", "pose": np.eye(4).reshape(16).tolist()}]}
+    site = BuiltSite(Path("."), [{"tag": "T1", "asset": "power_transformer", "enu": [40.0, 10.0, 0.5], "yaw_rad": 0.7}],
+                     {"power_transformer": manifest}, (0.0, 0.0, 0.0), "2025-03-20")
+    dial = gauge.placed_dial(site, "T1")
+    np.testing.assert_allclose(dial.centre, (site.pose(site.placement("T1")) @ np.array([2.0, -3.05, 3.0, 1.0]))[:3])
+    pose = pinhole.look_at(dial.centre + 6.0 * dial.axis, dial.centre)
+    shot = Shot(dt.datetime(2025, 3, 20, 12, tzinfo=dt.timezone.utc), pose, lens(20.0), 0.8, 1.0, 500.0,
+                {"T1": {"oil_level_tank": 37.0}}, [], "T1")
+    k = pinhole.intrinsics(shot.lens.hfov, 320, 240)
+    labels = frame_labels(shot, k, site, 1.0, 0.0, dial)
+    box = labels["gauges"]["gauge_tank"]
+    x0, y0, x1, y1 = box["box"]
+    assert box["visible"] and x0 < 160 < x1 and y0 < 120 < y1  # the camera looks at the dial's centre
+    assert labels["pointer_angle_rad"] == state_binding(binding).output(37.0)
+    assert frame_labels(shot, k, site, 1.0, 0.0, None)["gauges"]["gauge_tank"] == {"box": None, "visible": False}
 
 
 def test_exposure_clamps_at_night_and_sensor_saturates():

@@ -62,7 +62,7 @@ def test_bushing_2_is_bushing_1_shifted_by_1_2_s_noise_included():
     for report, values in records:
         assert values[("bushing_2", "level")] == b1.level_at(5.0 * math.floor(report.t / 5.0) + 1.2)
     # The same on a fine clock, where bushing 1 itself reaches t + 1.2 s.
-    ctx = nodes.Context(seed=3, start=g.ctx.start, step_s=0.1)
+    ctx = nodes.RunContext(seed=3, start=g.ctx.start, step_s=0.1)
     one = nodes.Bushing("b1", {"phi": 0.3}, ctx)
     two = nodes.Bushing("b2", {"phi": 0.3, "delay_s": 1.2, "noise_stream": "b1"}, ctx)
     for k in range(200):
@@ -71,16 +71,16 @@ def test_bushing_2_is_bushing_1_shifted_by_1_2_s_noise_included():
 
 def test_bushing_noise_is_bounded_and_reproducible_per_seed():
     start = graph.load_scenario(OIL_LEAK).start
-    noisy = nodes.Bushing("b", {}, nodes.Context(1, start, 1.0))
-    clean = nodes.Bushing("b", {"noise": 0.0}, nodes.Context(1, start, 1.0))
+    noisy = nodes.Bushing("b", {}, nodes.RunContext(1, start, 1.0))
+    clean = nodes.Bushing("b", {"noise": 0.0}, nodes.RunContext(1, start, 1.0))
     times = np.arange(0.0, 300.0, 0.5)
     xi = np.array([noisy.level_at(t) - clean.level_at(t) for t in times])
     inside = np.array([30.0 < clean.level_at(t) < 100.0 for t in times])
     assert np.all(np.abs(xi) <= 2.0)
     assert xi[inside].std() > 0.8  # uniform on [-2, 2] has std 1.15: it is really there
-    again = nodes.Bushing("b", {}, nodes.Context(1, start, 1.0))
+    again = nodes.Bushing("b", {}, nodes.RunContext(1, start, 1.0))
     assert [again.level_at(t) for t in times] == [noisy.level_at(t) for t in times]
-    other = nodes.Bushing("b", {}, nodes.Context(2, start, 1.0))
+    other = nodes.Bushing("b", {}, nodes.RunContext(2, start, 1.0))
     assert [other.level_at(t) for t in times] != [noisy.level_at(t) for t in times]
 
 

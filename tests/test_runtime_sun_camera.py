@@ -66,7 +66,7 @@ def test_polar_day_and_night_give_finite_documented_values(when, polar):
     study = sun.study_elevation(lat, lon, when)
     assert study == (eph if polar == "polar_day" else 0.0)
     assert (eph > 0) == (polar == "polar_day")
-    ctx = nodes.Context(0, when, 1.0)
+    ctx = nodes.RunContext(0, when, 1.0)
     out = nodes.Sun("s", {"lat": lat, "lon": lon, "model": "study"}, ctx).step(0.0, {})
     assert all(math.isfinite(v) for v in out.values())
     assert (out["irradiance"] > 0) == (polar == "polar_day")
@@ -214,7 +214,7 @@ def test_the_study_runs_on_the_sites_clock(tmp_path):
     from pipeline.runtime import site as render_site
     from pipeline.render import study
 
-    site = render_site.Site(tmp_path, [], {}, (31.0, 121.0, 0.0), "2025-06-21", zone=ZoneInfo("Asia/Shanghai"))
+    site = render_site.BuiltSite(tmp_path, [], {}, (31.0, 121.0, 0.0), "2025-06-21", zone=ZoneInfo("Asia/Shanghai"))
     cfg = study.load_study(Path(__file__).resolve().parent.parent / "sources" / "study.toml")
     times = dict(study.study_times(site, cfg))
     assert times["early_morning"].isoformat() == "2025-06-21T06:45:00+08:00"

@@ -217,7 +217,7 @@ def test_study_viewpoint_faces_the_late_sun_with_a_clear_view(sample):
     assert math.degrees(math.acos(float(axis @ late.sun_dir))) < 25.0
     assert not study._blocked(site, late.cam_pose[:3, 3], late.sun_dir, 300.0)
     cfg = STUDY
-    centre, normal = gauge.dial_world(site.pose(site.placement(cfg.target)))
+    normal = gauge.placed_dial(site, cfg.target).axis
     assert float(-axis @ normal) > math.cos(cfg.max_obliquity) - 1e-9
 
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..render.cycles import CyclesScene
-from ..render.frames import pointer_binding, populate
+from ..render.frames import populate
 from ..render.sensor import PhoneCamera, develop, metered_gain, metered_white_balance
 from ..runtime.site import load_site
 from ..render.study import load_study, study_shots
@@ -53,7 +53,7 @@ def bench_render(out, repeats: int = 5, threads: int | None = None, *, sources: 
     try:
         t0 = time.perf_counter()
         populate(bl, site, [shot])
-        bl.set_shot(shot, pointer_binding(site, shot.target))
+        bl.set_shot(shot)
         load_s = time.perf_counter() - t0
         times, frames = [], []
         for _ in range(repeats):

@@ -26,11 +26,11 @@ def asset_steps(cfg: config.AssetConfig, memo=None, checked=None) -> list[tuple[
 
     from ..geometry.collision import CollisionOptions, collision_step
     from ..geometry.lod import LodOptions, lod_chain
-    from ..geometry.simplify import Workers
+    from ..geometry.simplify import Parallelism
     from ..findings import visual_verdict
     from ..fork_join import core_share, spread
 
-    workers = Workers(cores=core_share(), spread=spread)
+    workers = Parallelism(cores=core_share(), spread=spread)
     return [
         ("collision", collision_step(CollisionOptions(mode=cfg.collision_mode))),
         ("lod", lod_chain(LodOptions(budgets_m=cfg.lod_budgets_m), memo, partial(visual_verdict, memo=checked),

@@ -7,28 +7,25 @@ what conditions and equipment states to sample, how many frames, and the seed.
     [states]     oil_level = [lo, hi] (%), switch_open = probability
     [[cameras]]  kind = "inspection_point" | "route" | "ptz", weight, zoom = [lo, hi], ...
 
-Every error names the file and the key: a config is user input.
+Read through `config.read_config` against schemas/dataset.schema.json (the keys, their
+types, bounds and defaults), then checked for what a schema cannot say; every problem
+is reported at once, each naming the file and the key: a config is user input.
 """
 
 from __future__ import annotations
 
 import datetime as dt
 import hashlib
-import re
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import UserError
-from ..runtime import camera as camera_model
+from .. import config
+from ..errors import raise_all
 
-NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
-# frames a dataset may hold: a run plans its frames before the first render (the scene
-# a worker loads is what they see), 17 ms each on the sample (culling, mostly), and
-# renders one in 5 to 30 s: a hundred thousand is half an hour of planning ahead of
-# weeks of rendering; a billion would be 200 days of planning before anything shows
+# frames a dataset may hold: a run plans each frame it renders (17 ms on the sample,
+# culling mostly) and renders it in 5 to 30 s, so a hundred thousand frames is weeks of
+# rendering; a billion is a typo, refused before anything is planned
 MAX_COUNT = 100_000
-KINDS = ("inspection_point", "route", "ptz")
 
 
 @dataclass(frozen=True)
@@ -55,7 +52,7 @@ class States:
 
 
 @dataclass(frozen=True)
-class Camera:
+class CameraFamily:
     """One camera family. inspection_point: `points` (site.toml names; all when empty)
     looking at their targets. route: a polyline `path` of plan (x, y) on `level`,
     `height` above it, looking at the nearest placement of `look_at` assets within
@@ -84,172 +81,72 @@ class DatasetConfig:
     sensor: Sensor
     conditions: Conditions
     states: States
-    cameras: tuple[Camera, ...]
+    cameras: tuple[CameraFamily, ...]
     digest: str = field(default="")  # sha256 of the file: what a resumed run must match
 
 
 def load(path: str | Path) -> DatasetConfig:
+    """Read a dataset config: every problem the schema (schemas/dataset.schema.json)
+    or the checks after it find, at once, in one UserError naming the file and each key."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-        data = tomllib.loads(raw.decode("utf-8"))
-    except FileNotFoundError:
-        raise UserError(path, None, "no such dataset config") from None
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
-        raise UserError(path, None, f"not a TOML file: {e}") from None
-    r = _Reader(path)
-    head = r.table(data, "dataset")
-    name = r.text(head, "dataset.name")
-    if not NAME.match(name):
-        raise UserError(path, "dataset.name", f"{name!r}: letters, digits, '_', '.', '-' (a folder name)")
-    cams = data.get("cameras")
-    if not isinstance(cams, list) or not cams:
-        raise UserError(path, "cameras", "at least one [[cameras]] table")
+    data = config.read_config(path, "dataset")
+    raise_all(path, _problems(data))
+    head, sensor, cond, states = data["dataset"], data["sensor"], data["conditions"], data["states"]
     return DatasetConfig(
-        path=path, name=name, seed=r.integer(head, "dataset.seed"),
-        count=_count(r, head),
-        sensor=_sensor(r, data.get("sensor", {})), conditions=_conditions(r, r.table(data, "conditions")),
-        states=_states(r, data.get("states", {})),
-        cameras=tuple(_camera(r, c, f"cameras[{i}]") for i, c in enumerate(cams)),
-        digest=hashlib.sha256(raw).hexdigest())
+        path=path, name=head["name"], seed=head["seed"], count=head["count"],
+        sensor=Sensor(**sensor),
+        conditions=Conditions(tuple(dt.date.fromisoformat(d) for d in cond["dates"]),
+                              tuple(dt.time.fromisoformat(x) for x in cond["local_time"]),
+                              _pair(cond["tau_atm"]), _pair(cond["aerosol"])),
+        states=States(_pair(states["oil_level"]), float(states["switch_open"])),
+        cameras=tuple(_camera(c) for c in data["cameras"]),
+        digest=hashlib.sha256(path.read_bytes()).hexdigest())
 
 
-def _count(r: "_Reader", head: dict) -> int:
-    count = r.integer(head, "dataset.count", lo=1)
-    if count > MAX_COUNT:
-        raise UserError(r.path, "dataset.count", f"{count:,} frames: a dataset holds at most {MAX_COUNT:,} (a run "
-                                                 "plans its frames before the first render, and each takes seconds "
-                                                 "to render): split it into datasets of their own, with other seeds")
-    return count
-
-
-def _sensor(r: "_Reader", t: dict) -> Sensor:
-    d = Sensor()
-    denoise = t.get("render_denoise", d.render_denoise)
-    if denoise not in ("", "FAST", "BALANCED", "HIGH"):
-        raise UserError(r.path, "sensor.render_denoise", f"{denoise!r}: one of '', FAST, BALANCED, HIGH")
-    return Sensor(width=r.integer(t, "sensor.width", d.width, lo=16, hi=8192),
-                  height=r.integer(t, "sensor.height", d.height, lo=16, hi=8192),
-                  samples=r.integer(t, "sensor.samples", d.samples, lo=1, hi=4096), render_denoise=denoise,
-                  tasks_per_worker=r.integer(t, "sensor.tasks_per_worker", d.tasks_per_worker, lo=1))
-
-
-def _conditions(r: "_Reader", t: dict) -> Conditions:
-    dates = t.get("dates")
-    if not isinstance(dates, list) or not dates:
-        raise UserError(r.path, "conditions.dates", "a list of dates, e.g. [\"2025-03-20\"]")
-    parsed = []
-    for i, d in enumerate(dates):
-        try:
-            parsed.append(d if isinstance(d, dt.date) else dt.date.fromisoformat(str(d)))
-        except ValueError:
-            raise UserError(r.path, f"conditions.dates[{i}]", f"{d!r} is not a date (YYYY-MM-DD)") from None
-    times = r.pair(t, "conditions.local_time", None, kind=str)
-    try:
-        window = tuple(dt.time.fromisoformat(x) for x in times)
-    except ValueError:
-        raise UserError(r.path, "conditions.local_time", f"{times!r}: two local times HH:MM") from None
-    if window[0] > window[1]:
-        raise UserError(r.path, "conditions.local_time", "the window must not wrap past midnight")
-    return Conditions(tuple(parsed), window, r.pair(t, "conditions.tau_atm", (0.2, 0.2), lo=0.0, hi=5.0),
-                      r.pair(t, "conditions.aerosol", (1.0, 1.0), lo=0.0, hi=10.0))
-
-
-def _states(r: "_Reader", t: dict) -> States:
-    return States(r.pair(t, "states.oil_level", (100.0, 100.0), lo=0.0, hi=100.0),
-                  r.number(t, "states.switch_open", 0.0, lo=0.0, hi=1.0))
-
-
-def _camera(r: "_Reader", t: dict, key: str) -> Camera:
-    if not isinstance(t, dict):
-        raise UserError(r.path, key, "a table")
-    kind = t.get("kind")
-    if kind not in KINDS:
-        raise UserError(r.path, f"{key}.kind", f"{kind!r}: one of {', '.join(KINDS)}")
-    zoom = r.pair(t, f"{key}.zoom", (1.0, 1.0), lo=camera_model.ZOOM_MIN, hi=camera_model.ZOOM_MAX)
-    common = dict(kind=kind, weight=r.number(t, f"{key}.weight", 1.0, lo=0.0), zoom=zoom)
-    if kind == "inspection_point":
-        points = t.get("points", [])
-        if not isinstance(points, list) or not all(isinstance(p, str) for p in points):
-            raise UserError(r.path, f"{key}.points", "a list of site.toml inspection point names")
-        return Camera(**common, points=tuple(points))
-    if kind == "route":
-        path = t.get("path")
-        if (not isinstance(path, list) or len(path) < 2
-                or not all(isinstance(p, list) and len(p) == 2 and all(_is_number(v) for v in p) for p in path)):
-            raise UserError(r.path, f"{key}.path", "a polyline of at least two plan points [x, y] (m)")
-        look = t.get("look_at", [])
-        if not isinstance(look, list) or not all(isinstance(a, str) for a in look):
-            raise UserError(r.path, f"{key}.look_at", "a list of asset names")
-        return Camera(**common, path=tuple((float(x), float(y)) for x, y in path), level=r.text(t, f"{key}.level"),
-                      height=r.number(t, f"{key}.height", 1.6, lo=0.1, hi=50.0), look_at=tuple(look),
-                      reach_m=r.number(t, f"{key}.reach_m", 30.0, lo=1.0))
-    presets = t.get("presets")
-    if not isinstance(presets, list) or not presets:
-        raise UserError(r.path, f"{key}.presets", "a list of {target = TAG, zoom = Z}")
+def _problems(data: dict) -> list[tuple[str, str]]:
+    """What the schema cannot say: the count's bound (a message that says why), real
+    dates and times, a window within one day, every range [lo, hi] in order."""
     out = []
-    for i, p in enumerate(presets):
-        pk = f"{key}.presets[{i}]"
-        if not isinstance(p, dict):
-            raise UserError(r.path, pk, "a table {target = TAG, zoom = Z}")
-        out.append((r.text(p, f"{pk}.target"),
-                    r.number(p, f"{pk}.zoom", 1.0, lo=camera_model.ZOOM_MIN, hi=camera_model.ZOOM_MAX)))
-    return Camera(**common, mast=r.text(t, f"{key}.mast"), presets=tuple(out))
+    count = data["dataset"]["count"]
+    if count > MAX_COUNT:
+        out.append(("dataset.count", f"{count:,} frames: a dataset holds at most {MAX_COUNT:,} (each takes seconds "
+                                     "to render): split it into datasets of their own, with other seeds"))
+    cond = data["conditions"]
+    for i, d in enumerate(cond["dates"]):
+        try:
+            dt.date.fromisoformat(d)
+        except ValueError:
+            out.append((f"conditions.dates[{i}]", f"{d!r} is not a date (YYYY-MM-DD)"))
+    times = []
+    for i, x in enumerate(cond["local_time"]):
+        try:
+            times.append(dt.time.fromisoformat(x))
+        except ValueError:
+            out.append((f"conditions.local_time[{i}]", f"{x!r} is not a local time HH:MM"))
+    if len(times) == 2 and times[0] > times[1]:
+        out.append(("conditions.local_time", "the window must not wrap past midnight"))
+    ranges = [("conditions.tau_atm", cond["tau_atm"]), ("conditions.aerosol", cond["aerosol"]),
+              ("states.oil_level", data["states"]["oil_level"])]
+    ranges += [(f"cameras[{i}].zoom", c["zoom"]) for i, c in enumerate(data["cameras"])]
+    for key, value in ranges:
+        lo, hi = _pair(value)
+        if lo > hi:
+            out.append((key, f"[{lo:g}, {hi:g}]: a range [lo, hi] must be in order"))
+    return out
 
 
-def _is_number(v) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+def _pair(value) -> tuple[float, float]:
+    """A range as the schema allows it: one number (lo = hi) or [lo, hi]."""
+    lo, hi = (value, value) if isinstance(value, (int, float)) else value
+    return float(lo), float(hi)
 
 
-class _Reader:
-    """Typed reads of one file's tables, each failure one UserError naming the key."""
-
-    def __init__(self, path: Path):
-        self.path = path
-
-    @staticmethod
-    def _leaf(key: str) -> str:
-        return key.rsplit(".", 1)[-1]
-
-    def table(self, data: dict, key: str) -> dict:
-        t = data.get(key)
-        if not isinstance(t, dict):
-            raise UserError(self.path, key, f"a [{key}] table")
-        return t
-
-    def text(self, t: dict, key: str) -> str:
-        v = t.get(self._leaf(key))
-        if not isinstance(v, str) or not v:
-            raise UserError(self.path, key, "a non-empty string")
-        return v
-
-    def integer(self, t: dict, key: str, default=None, lo=None, hi=None) -> int:
-        v = t.get(self._leaf(key), default)
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise UserError(self.path, key, f"{v!r} is not an integer")
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise UserError(self.path, key, f"{v} is outside [{lo}, {hi}]")
-        return v
-
-    def number(self, t: dict, key: str, default=None, lo=None, hi=None) -> float:
-        v = t.get(self._leaf(key), default)
-        if not _is_number(v) or v != v:
-            raise UserError(self.path, key, f"{v!r} is not a number")
-        if (lo is not None and v < lo) or (hi is not None and v > hi):
-            raise UserError(self.path, key, f"{v} is outside [{lo}, {hi}]")
-        return float(v)
-
-    def pair(self, t: dict, key: str, default, lo=None, hi=None, kind=float) -> tuple:
-        v = t.get(self._leaf(key), default)
-        if _is_number(v) and kind is float:
-            v = [v, v]
-        ok = isinstance(v, (list, tuple)) and len(v) == 2 and all(
-            (_is_number(x) and x == x) if kind is float else isinstance(x, kind) for x in v)
-        if not ok:
-            raise UserError(self.path, key, f"{v!r}: two values [from, to]")
-        if kind is not float:
-            return tuple(v)
-        a, b = float(v[0]), float(v[1])
-        if a > b or (lo is not None and a < lo) or (hi is not None and b > hi):
-            raise UserError(self.path, key, f"[{a:g}, {b:g}] must be ordered and within [{lo}, {hi}]")
-        return a, b
+def _camera(t: dict) -> CameraFamily:
+    common = dict(kind=t["kind"], weight=float(t["weight"]), zoom=_pair(t["zoom"]))
+    if t["kind"] == "inspection_point":
+        return CameraFamily(**common, points=tuple(t["points"]))
+    if t["kind"] == "route":
+        return CameraFamily(**common, path=tuple((float(x), float(y)) for x, y in t["path"]), level=t["level"],
+                            height=float(t["height"]), look_at=tuple(t["look_at"]), reach_m=float(t["reach_m"]))
+    return CameraFamily(**common, mast=t["mast"],
+                        presets=tuple((p["target"], float(p["zoom"])) for p in t["presets"]))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..perception.gauge_reader import Dial
+from ..perception.gauge import Dial
 from ..geometry.pinhole import project
 
 # a dial is visible when the surface at its centre's pixel is its own placement's and
@@ -53,7 +53,7 @@ def annotations(ids: np.ndarray, tag_of: dict[int, str], category_of: dict[str, 
 
 def gauge_visibility(dial: Dial, cam_pose: np.ndarray, k: dict, ids: np.ndarray, depth: np.ndarray,
                      instance: int) -> dict:
-    """Is `dial` (its placement's, gauge_reader.dial_of) seen in this frame: its centre
+    """Is `dial` (its placement's, gauge.dial_of) seen in this frame: its centre
     in the frame and facing the camera, on a pixel of its own instance, at the dial's
     depth (not hidden behind something of its own, such as the tank seen from behind)."""
     centre = dial.centre

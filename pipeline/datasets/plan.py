@@ -18,10 +18,10 @@ from .. import config
 from ..errors import UserError
 from ..runtime import camera as camera_model
 from .. import sun as sun_model
-from .config import Camera, DatasetConfig
-from ..perception.gauge_reader import dial_of
+from .config import CameraFamily, DatasetConfig
+from ..perception.gauge import dial_of
 from ..geometry.pinhole import cull, intrinsics, look_at
-from ..runtime.site import Shot, Site
+from ..runtime.site import Shot, BuiltSite
 
 MAST_EYE_ABOVE_TILT_M = 0.15  # the PTZ head's lens above its tilt axis
 
@@ -54,7 +54,7 @@ def frame_seed(cfg: DatasetConfig, index: int) -> int:
 class Planner:
     """Frames of one config on one site; the site's camera routes resolved once."""
 
-    def __init__(self, cfg: DatasetConfig, site: Site, sources: Path):
+    def __init__(self, cfg: DatasetConfig, site: BuiltSite, sources: Path):
         self.cfg, self.site = cfg, site
         self.weights = np.array([c.weight for c in cfg.cameras], float)
         if not self.weights.sum() > 0:
@@ -71,7 +71,7 @@ class Planner:
                            and site.manifests[p["asset"]].get("category") == "switchgear"]
 
     # -- checks against the site
-    def _check(self, c: Camera, key: str) -> None:
+    def _check(self, c: CameraFamily, key: str) -> None:
         tags = {p["tag"] for p in self.site.placements}
         for name in c.points:
             if name not in self.site.inspection:
@@ -85,7 +85,7 @@ class Planner:
                 if target not in tags:
                     raise UserError(self.cfg.path, f"{key}.presets[{j}].target", f"{target!r} is not a placement")
 
-    def _route(self, c: Camera, i: int, sources: Path) -> np.ndarray:
+    def _route(self, c: CameraFamily, i: int, sources: Path) -> np.ndarray:
         """(n, 3) ENU vertices of a route polyline, `height` above its level."""
         from ..georef import Georeferencer
 
@@ -137,7 +137,7 @@ class Planner:
     def _aim(self, tag: str) -> np.ndarray:
         return aim(self.site, tag)
 
-    def _pose(self, cam: Camera, ci: int, rng: np.random.Generator) -> tuple[np.ndarray, str, str, float | None]:
+    def _pose(self, cam: CameraFamily, ci: int, rng: np.random.Generator) -> tuple[np.ndarray, str, str, float | None]:
         """(camera pose, target tag or "", the camera's name in the labels, the preset's
         zoom for a PTZ camera)."""
         if cam.kind == "inspection_point":
@@ -187,7 +187,7 @@ class Planner:
         return visible_tags(self.spheres, shot, self.cfg.sensor.width, self.cfg.sensor.height)
 
 
-def aim(site: Site, tag: str) -> np.ndarray:
+def aim(site: BuiltSite, tag: str) -> np.ndarray:
     """Where a camera aims at a placement: its gauge's dial when it has one, else the
     centre of its bounding box."""
     p = site.placement(tag)
@@ -199,7 +199,7 @@ def aim(site: Site, tag: str) -> np.ndarray:
     return (site.pose(p) @ np.r_[(lo + hi) / 2, 1.0])[:3]
 
 
-def mast_eye(site: Site, mast: str) -> np.ndarray:
+def mast_eye(site: BuiltSite, mast: str) -> np.ndarray:
     """A PTZ head's lens: above the tilt joint of the mast's model."""
     p = site.placement(mast)
     joints = site.manifests[p["asset"]].get("joints", [])
@@ -215,7 +215,7 @@ def mast_eye(site: Site, mast: str) -> np.ndarray:
 def visible_tags(spheres: list[dict], shot: Shot, width: int, height: int) -> list[str]:
     """Placements the camera sees or that shadow into what it sees (culling), the shot's
     target always: what a frame shows (`twin dataset`'s and `twin serve`'s alike).
-    spheres: Site.spheres()."""
+    spheres: BuiltSite.spheres()."""
     k = intrinsics(shot.lens.hfov, width, height)
     sun = shot.sun_dir if shot.sun_elevation > 0 else None
     tags = {it["tag"] for it in cull(spheres, shot.cam_pose, k, shot.lens.near, shot.lens.far, sun)}

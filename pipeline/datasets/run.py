@@ -37,10 +37,10 @@ from ..errors import UserError
 from ..files import atomic_path, atomic_write
 from . import config as dataset_config, labels
 from .plan import FramePlan, Planner, frame_id, switch_angles
-from ..perception.gauge_reader import dial_of
+from ..perception.gauge import dial_of
 from ..geometry.pinhole import intrinsics
 from ..render.sensor import PhoneCamera
-from ..runtime.site import Site, load_site
+from ..runtime.site import BuiltSite, load_site
 
 RENDERER = "blender-cycles-cpu"
 FramePool = Callable[[int, int], ContextManager[Executor]]  # (workers, frames a worker renders before it goes)
@@ -134,7 +134,7 @@ def _done(folder: Path, index: int) -> bool:
                                                 f"depth/{fid}.npy"))
 
 
-def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
+def _assemble(folder: Path, cfg, site: BuiltSite, n: int) -> None:
     records = [json.loads((folder / "records" / f"{frame_id(i)}.json").read_text()) for i in range(n)]
     lines = [json.dumps({k: v for k, v in r.items() if k != "annotations"}, sort_keys=True,
                         separators=(",", ":")) for r in records]
@@ -310,7 +310,7 @@ def _context(job: dict) -> dict:
     return _WORKER
 
 
-def open_scene(site: Site, cam: PhoneCamera, seed: int, tags: list[str]) -> dict:
+def open_scene(site: BuiltSite, cam: PhoneCamera, seed: int, tags: list[str]) -> dict:
     """A Cycles scene holding `tags` (and the terrain, and the floodlights of the
     lighting poles among them), every placement labelled with its instance id: what
     `shoot` renders frames in (a dataset's worker, `twin serve`'s render process)."""
@@ -346,7 +346,7 @@ def shoot(ctx: dict, plan: FramePlan) -> tuple[np.ndarray, np.ndarray, np.ndarra
     """One frame in an `open_scene`: (RGB uint8 (h, w, 3), instance ids uint16, planar
     depth float32, the frame's record). Only what the plan names changes in the scene
     (seed, shown placements, switch joints, camera, sun and sky, bound visuals)."""
-    from ..render.frames import develop_shot, pointer_binding
+    from ..render.frames import develop_shot
 
     site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
     scene.scene.cycles.seed = plan.seed
@@ -355,7 +355,7 @@ def shoot(ctx: dict, plan: FramePlan) -> tuple[np.ndarray, np.ndarray, np.ndarra
         if tag in scene.objects:
             m = site.manifests[site.placement(tag)["asset"]]
             scene.set_joints(tag, m, switch_angles(m, position))
-    scene.set_shot(shot, pointer_binding(site, shot.target) if shot.target else None)
+    scene.set_shot(shot)
     scene.set_sky(plan.aerosol)
     linear = scene.render()
     rgb, gain, wb, veil = develop_shot(scene, shot, linear, cam, None, plan.seed)

@@ -28,6 +28,7 @@ from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Future, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..errors import UserError
 from ..files import atomic_write
@@ -53,6 +54,33 @@ class BuildReport:
     @property
     def ran(self) -> list[str]:
         return [e["task"] for e in self.explanations if e["ran"]]
+
+
+@dataclass
+class _Build:
+    """One build's state, as the scheduler's steps share it: what waits, runs and is
+    done, what each finished task made, what failed, the pool and the report."""
+
+    order: list[Task]
+    state: dict  # the state file: each task's last good entry, the file hash memo
+    hasher: FileHasher
+    stop_on_error: bool
+    report: BuildReport = field(default_factory=BuildReport)
+    pending: dict[str, Task] = field(default_factory=dict)
+    done: set[str] = field(default_factory=set)
+    running: dict[Future, Task] = field(default_factory=dict)
+    digests: dict[str, str] = field(default_factory=dict)  # what each finished task made (its dependents' keys hold it)
+    remade: set[str] = field(default_factory=set)  # tasks run or restored in this build
+    broken: dict[str, list[str]] = field(default_factory=dict)  # task without new outputs -> the failed tasks behind it
+    suspects: set[str] = field(default_factory=set)  # in flight when a worker died: rerun one at a time
+    warming: list[tuple[Future, tuple[str, ...]]] = field(default_factory=list)  # warm-ups sent to idle workers
+    pool: Any = None  # started when the first task needs a worker (Scheduler._pool)
+    threads: int | None = None  # cores per worker (Scheduler._worker_setup), set once per build
+    dead: bool = False  # the pool refused a task: one of its workers died
+    workers: dict = field(default_factory=dict)  # the pool's processes, kept to learn how one died
+
+    def __post_init__(self):
+        self.pending = {t.name: t for t in self.order}
 
 
 class BuildLock:
@@ -187,169 +215,214 @@ class Scheduler:
         stands on that dependency's last good outputs (Task.previous_ok), and
         everything else still runs. `stop_on_error`: start nothing after a failure."""
         order = check_graph(tasks)
-        report = BuildReport()
         with BuildLock(self.build, notify=lambda m: print(m, file=sys.stderr)), self.cache.in_use(), _pipes_ignored():
             shutil.rmtree(self.build / ".staging", ignore_errors=True)
             state = self._load_state()
-            hasher = FileHasher(state.get("hashes"))
-            digests: dict[str, str] = {}  # what each finished task made (its dependents' keys hold it)
-            remade: set[str] = set()  # tasks run or restored in this build
-            broken: dict[str, list[str]] = {}  # task without new outputs -> the failed tasks behind it
-            suspects: set[str] = set()  # in flight when a worker died: rerun one at a time
-            pending = {t.name: t for t in order}
-            done: set[str] = set()
-            running: dict[Future, Task] = {}
-            warming: list[tuple[Future, tuple[str, ...]]] = []  # warm-ups sent to idle workers (_warm_idle)
-            pool, threads = None, None
-            dead = False  # the pool refused a task: one of its workers died
-            workers: dict = {}  # the pool's processes, kept to learn how one died
+            b = _Build(order, state, FileHasher(state.get("hashes")), stop_on_error)
             try:
-                while pending or running:
-                    # Longest first, and only as many in flight as there are workers, so a
-                    # long task that becomes ready is not queued behind short ones.
-                    ready = [t for t in pending.values() if all(d in done for d in t.deps)]
-                    for task in sorted(ready, key=lambda t: (t.name not in suspects, -t.cost, t.name)):
-                        name = task.name
-                        pending.pop(name)
-                        if task.problem is not None:  # the planner found it cannot run
-                            self._fail(report, broken, task, _as_failure(task.problem))
-                            done.add(name)
-                            continue
-                        stood_on, missing = self._stand_in(task, broken, state, digests)
-                        if missing:
-                            self._block(report, broken, task, missing)
-                            done.add(name)
-                            continue
-                        previous = state["tasks"].get(name)
-                        self._key(task, hasher, digests, previous)
-                        if self._fresh(previous, task.key):
-                            self.cache.used(task.key)
-                            why = explain(task, previous, False, digests)
-                            renewed = sorted(d for d in task.deps if d in remade)
-                            if renewed:  # they reran (or came from the cache) and made the same files
-                                why["cut_off_after"] = renewed
-                            report.explanations.append(_stood_on(why, stood_on))
-                            report.results[name] = previous.get("result", {})
-                            digests[name] = previous["digest"]
-                            done.add(name)
-                            self._tick(task)
-                            continue
-                        if self.cache.has(task.key):
-                            remade.add(name)
-                            meta = self._place(task, task.key)
-                            report.explanations.append(_stood_on(explain(task, previous, True, digests), stood_on))
-                            self._finish(state, task, digests, meta, report)
-                            done.add(name)
-                            continue
-                        # while a dead worker's tasks are retried, one runs at a time
-                        if len(running) >= (1 if suspects else self.jobs):
-                            pending[name] = task  # its turn comes when a worker is free
-                            continue
-                        remade.add(name)
-                        if pool is None:
-                            if threads is None:
-                                threads = self._worker_setup(order, state, hasher)
-                            pool = self.executor(Workers(self.jobs, threads, self._cpus(), self.memory_limit))
-                        staging = self.build / ".staging" / task.key
-                        shutil.rmtree(staging, ignore_errors=True)
-                        staging.mkdir(parents=True)
-                        # a task that starts with nothing running or waiting beside it
-                        # gets every core (what becomes ready later shares them)
-                        alone = not running and not any(t.name in pending for t in ready if t is not task)
-                        cores = self.cores if alone else threads
-                        try:
-                            future = pool.submit(run_task, task.action, task.args, str(staging), cores)
-                        except BrokenExecutor:  # a worker died since the last wait: its pool is gone
-                            pending[name] = task
-                            dead = True
-                            break
-                        running[future] = task
-                        report.explanations.append(_stood_on(explain(task, previous, False, digests), stood_on))
-                        workers.update(_processes(pool))
-                    if dead and not running:  # nothing in flight to learn more from: a new pool
-                        pool.shutdown(wait=True, cancel_futures=True)
-                        pool, warming, workers, dead = None, [], {}, False
-                        continue
-                    if pool is not None and not dead:
-                        self._warm_idle(pool, running, warming, pending, done)
-                    if not running:
-                        if pending:  # everything left waits on a failed task
-                            continue
-                        break
-                    finished, _ = wait(list(running), return_when=FIRST_COMPLETED)
-                    if any(isinstance(f.exception(), BrokenExecutor) for f in finished):
-                        # a worker died and its pool with it: every task in flight ends now
-                        finished, _ = wait(list(running))
-                    lost: list[Task] = []  # tasks whose worker died under them
-                    for fut in sorted(finished, key=lambda f: running[f].name):
-                        task = running.pop(fut)
-                        staging = self.build / ".staging" / task.key
-                        try:
-                            out = fut.result()
-                        except BrokenExecutor:
-                            lost.append(task)
-                            continue
-                        except Exception as e:  # noqa: BLE001 - the executor's failure, not the build's
-                            out = {"ok": False, "error": f"{type(e).__name__}: {e}"}
-                        if not out["ok"]:
-                            self._fail(report, broken, task, out)
-                            suspects.discard(task.name)
-                            shutil.rmtree(staging, ignore_errors=True)
-                            done.add(task.name)
-                            if stop_on_error:
-                                for waiting in list(pending.values()):
-                                    if waiting.name not in suspects:
-                                        pending.pop(waiting.name)
-                                        self._block(report, broken, waiting, waiting.deps, stopped=True)
-                                        done.add(waiting.name)
-                            continue
-                        suspects.discard(task.name)
-                        report.timings[task.name] = out["seconds"]
-                        task.settle(out["result"].get("opened", {}), digests)  # what it read enters its key
-                        if task.opened:
-                            self.cache.keep_opened(task.base_key, sorted(task.opened))
-                        self.cache.put(task.key, staging, out["result"])
-                        meta = self._place(task, task.key)
-                        self._finish(state, task, digests, meta, report)
-                        done.add(task.name)
-                        state["hashes"] = hasher.kept()
-                        self._save_state(state)
-                    if lost:
-                        pool.shutdown(wait=True, cancel_futures=True)
-                        pool, warming, dead = None, [], False
-                        self._worker_died(report, broken, lost, suspects, pending, done, workers)
-                        workers = {}
+                self._loop(b)
             finally:
-                if pool is not None:
-                    pool.shutdown(wait=True, cancel_futures=True)
-                state["hashes"] = hasher.kept()
-                self._save_state(state)
-                shutil.rmtree(self.build / ".staging", ignore_errors=True)
-            if remade and self.cache_limit is not None:
-                report.cache = self.cache.prune(self.cache_limit, {e["key"] for e in state["tasks"].values()})
+                self._close(b)
+            if b.remade and self.cache_limit is not None:
+                b.report.cache = self.cache.prune(self.cache_limit, {e["key"] for e in state["tasks"].values()})
         # in task order, not in the order workers happened to finish
-        report.errors.sort(key=lambda e: e["task"])
-        report.failed.sort()
-        return report
+        b.report.errors.sort(key=lambda e: e["task"])
+        b.report.failed.sort()
+        return b.report
 
-    def _stand_in(self, task: Task, broken: dict[str, list[str]], state: dict,
-                  digests: dict[str, str]) -> tuple[list[str], list[str]]:
+    def _loop(self, b: _Build) -> None:
+        """Start what is ready, wait for a task in flight, record it; until none is left."""
+        while b.pending or b.running:
+            self._dispatch(b)
+            if b.dead and not b.running:  # nothing in flight to learn more from: a new pool
+                self._drop_pool(b)
+                continue
+            if b.pool is not None and not b.dead:
+                self._warm_idle(b)
+            if not b.running:
+                if b.pending:  # everything left waits on a failed task
+                    continue
+                break
+            self._collect(b, self._wait(b))
+
+    def _close(self, b: _Build) -> None:
+        """The end of a build, however it ends: the pool stops, the state is saved, staging goes."""
+        if b.pool is not None:
+            b.pool.shutdown(wait=True, cancel_futures=True)
+        b.state["hashes"] = b.hasher.kept()
+        self._save_state(b.state)
+        shutil.rmtree(self.build / ".staging", ignore_errors=True)
+
+    # --- select and decide ------------------------------------------------------
+    def _select(self, b: _Build) -> list[Task]:
+        """The tasks whose dependencies are done: a dead worker's suspects first, then
+        the longest, so a long task that becomes ready is not queued behind short ones."""
+        ready = [t for t in b.pending.values() if all(d in b.done for d in t.deps)]
+        return sorted(ready, key=lambda t: (t.name not in b.suspects, -t.cost, t.name))
+
+    def _dispatch(self, b: _Build) -> None:
+        """Decide each ready task in turn; stop when the pool refuses one (a worker died)."""
+        ready = self._select(b)
+        for task in ready:
+            b.pending.pop(task.name)
+            if not self._decide(b, task, ready):
+                break
+
+    def _decide(self, b: _Build, task: Task, ready: list[Task]) -> bool:
+        """Fail (the planner refused it), block, keep (fresh), restore (cached), wait for
+        a free worker, or submit `task`. False: the pool is broken, stop submitting."""
+        if task.problem is not None:  # the planner found it cannot run
+            self._fail(b, task, _as_failure(task.problem))
+            b.done.add(task.name)
+            return True
+        stood_on, missing = self._stand_in(b, task)
+        if missing:
+            self._block(b, task, missing)
+            b.done.add(task.name)
+            return True
+        previous = b.state["tasks"].get(task.name)
+        self._key(task, b.hasher, b.digests, previous)
+        if self._fresh(previous, task.key):
+            self._keep(b, task, previous, stood_on)
+        elif self.cache.has(task.key):
+            self._restore(b, task, previous, stood_on)
+        elif len(b.running) >= (1 if b.suspects else self.jobs):
+            # while a dead worker's tasks are retried, one runs at a time
+            b.pending[task.name] = task  # its turn comes when a worker is free
+        else:
+            return self._submit(b, task, previous, stood_on, ready)
+        return True
+
+    def _keep(self, b: _Build, task: Task, previous: dict, stood_on: list[str]) -> None:
+        """A task the last build ran with this key, whose outputs are in place."""
+        self.cache.used(task.key)
+        why = explain(task, previous, False, b.digests)
+        renewed = sorted(d for d in task.deps if d in b.remade)
+        if renewed:  # they reran (or came from the cache) and made the same files
+            why["cut_off_after"] = renewed
+        b.report.explanations.append(_stood_on(why, stood_on))
+        b.report.results[task.name] = previous.get("result", {})
+        b.digests[task.name] = previous["digest"]
+        b.done.add(task.name)
+        self._tick(task)
+
+    def _restore(self, b: _Build, task: Task, previous: dict | None, stood_on: list[str]) -> None:
+        """A task whose key is in the cache: its outputs come from there."""
+        b.remade.add(task.name)
+        meta = self._place(task, task.key)
+        b.report.explanations.append(_stood_on(explain(task, previous, True, b.digests), stood_on))
+        self._finish(b.state, task, b.digests, meta, b.report)
+        b.done.add(task.name)
+
+    # --- submit and the pool ----------------------------------------------------
+    def _submit(self, b: _Build, task: Task, previous: dict | None, stood_on: list[str], ready: list[Task]) -> bool:
+        """Send `task` to a worker, into a fresh staging folder. False: the pool refused it."""
+        b.remade.add(task.name)
+        pool = self._pool(b)
+        staging = self.build / ".staging" / task.key
+        shutil.rmtree(staging, ignore_errors=True)
+        staging.mkdir(parents=True)
+        # a task that starts with nothing running or waiting beside it gets every
+        # core (what becomes ready later shares them)
+        alone = not b.running and not any(t.name in b.pending for t in ready if t is not task)
+        try:
+            future = pool.submit(run_task, task.action, task.args, str(staging), self.cores if alone else b.threads)
+        except BrokenExecutor:  # a worker died since the last wait: its pool is gone
+            b.pending[task.name] = task
+            b.dead = True
+            return False
+        b.running[future] = task
+        b.report.explanations.append(_stood_on(explain(task, previous, False, b.digests), stood_on))
+        b.workers.update(_processes(pool))
+        return True
+
+    def _pool(self, b: _Build):
+        """The build's pool, started when the first task needs a worker (a build with
+        every task fresh starts none); its cores per worker are set once per build."""
+        if b.pool is None:
+            if b.threads is None:
+                b.threads = self._worker_setup(b.order, b.state, b.hasher)
+            b.pool = self.executor(Workers(self.jobs, b.threads, self._cpus(), self.memory_limit))
+        return b.pool
+
+    def _drop_pool(self, b: _Build) -> dict:
+        """Shut a pool one of whose workers died (the next task starts a new one); the
+        processes it had, whose exit codes say how the worker died."""
+        b.pool.shutdown(wait=True, cancel_futures=True)
+        workers = b.workers
+        b.pool, b.warming, b.dead, b.workers = None, [], False, {}
+        return workers
+
+    # --- collect ----------------------------------------------------------------
+    def _wait(self, b: _Build) -> list[Future]:
+        """The futures that finished, in task order; all of them when a worker died
+        (its pool goes with it: every task in flight ends now)."""
+        finished, _ = wait(list(b.running), return_when=FIRST_COMPLETED)
+        if any(isinstance(f.exception(), BrokenExecutor) for f in finished):
+            finished, _ = wait(list(b.running))
+        return sorted(finished, key=lambda f: b.running[f].name)
+
+    def _collect(self, b: _Build, finished: list[Future]) -> None:
+        """Record each finished task: its outputs, its failure, or its worker's death."""
+        lost: list[Task] = []  # tasks whose worker died under them
+        for fut in finished:
+            task = b.running.pop(fut)
+            out = _outcome(fut)
+            if out is None:
+                lost.append(task)
+            elif out["ok"]:
+                self._store(b, task, out)
+            else:
+                self._failed_run(b, task, out)
+        if lost:
+            self._worker_died(b, lost, self._drop_pool(b))
+
+    def _store(self, b: _Build, task: Task, out: dict) -> None:
+        """A task that ran: its staging folder into the cache, from there into build/."""
+        b.suspects.discard(task.name)
+        b.report.timings[task.name] = out["seconds"]
+        task.settle(out["result"].get("opened", {}), b.digests)  # what it read enters its key
+        if task.opened:
+            self.cache.keep_opened(task.base_key, sorted(task.opened))
+        self.cache.put(task.key, self.build / ".staging" / task.key, out["result"])
+        meta = self._place(task, task.key)
+        self._finish(b.state, task, b.digests, meta, b.report)
+        b.done.add(task.name)
+        b.state["hashes"] = b.hasher.kept()
+        self._save_state(b.state)
+
+    def _failed_run(self, b: _Build, task: Task, out: dict) -> None:
+        """A task that ran and failed: nothing of it is kept."""
+        self._fail(b, task, out)
+        b.suspects.discard(task.name)
+        shutil.rmtree(self.build / ".staging" / task.key, ignore_errors=True)
+        b.done.add(task.name)
+        if b.stop_on_error:
+            for waiting in list(b.pending.values()):
+                if waiting.name not in b.suspects:
+                    b.pending.pop(waiting.name)
+                    self._block(b, waiting, waiting.deps, stopped=True)
+                    b.done.add(waiting.name)
+
+    # --- failures ---------------------------------------------------------------
+    def _stand_in(self, b: _Build, task: Task) -> tuple[list[str], list[str]]:
         """(the failed dependencies whose last good outputs `task` runs on, those it is
         blocked by): it stands on those Task.previous_ok names whose last outputs are
         all in place. Those enter its key as the last build recorded them, so a scene
         made from them before is still up to date."""
-        failed = [d for d in task.deps if d in broken]
-        last = {d: state["tasks"].get(d) for d in failed}
+        failed = [d for d in task.deps if d in b.broken]
+        last = {d: b.state["tasks"].get(d) for d in failed}
         missing = [d for d, entry in last.items() if d not in task.previous_ok or not entry or "digest" not in entry
                    or not all((self.build / rel).is_file() for rel in entry.get("files", []))]
         if missing:
             return [], missing
         for d, entry in last.items():
-            digests[d] = entry["digest"]
+            b.digests[d] = entry["digest"]
         return failed, []
 
-    def _fail(self, report: BuildReport, broken: dict[str, list[str]], task: Task, out: dict) -> None:
+    def _fail(self, b: _Build, task: Task, out: dict) -> None:
         """A task that made nothing: its error in the report, its last outputs left as they were."""
+        report = b.report
         error = {"task": task.name, **{k: out[k] for k in ("file", "object", "message", "kind", "trace") if k in out}}
         error["error"] = out.get("user_error") or out.get("error") or "failed"
         report.errors.append(error)
@@ -363,24 +436,22 @@ class Scheduler:
         else:  # it never started (the planner refused it)
             report.explanations.append({"task": task.name, "ran": False, "reason": "failed", "changed": [],
                                         "failed": error["error"]})
-        broken[task.name] = [task.name]
+        b.broken[task.name] = [task.name]
         self._tick(task)
 
-    def _block(self, report: BuildReport, broken: dict[str, list[str]], task: Task, deps,
-               stopped: bool = False) -> None:
+    def _block(self, b: _Build, task: Task, deps, stopped: bool = False) -> None:
         """A task not run because `deps`, tasks it needs, failed or were blocked in turn
         (or because the build stopped at a failure)."""
-        behind = sorted({b for d in deps if d in broken for b in broken[d]})
-        broken[task.name] = behind
-        report.blocked[task.name] = behind
+        behind = sorted({x for d in deps if d in b.broken for x in b.broken[d]})
+        b.broken[task.name] = behind
+        b.report.blocked[task.name] = behind
         reason = "not started: the build stopped at a failure" if stopped or not behind else \
             "blocked by " + ", ".join(behind)
-        report.explanations.append({"task": task.name, "ran": False, "reason": reason, "changed": [],
-                                    "blocked_by": behind})
+        b.report.explanations.append({"task": task.name, "ran": False, "reason": reason, "changed": [],
+                                      "blocked_by": behind})
         self._tick(task)
 
-    def _worker_died(self, report: BuildReport, broken: dict[str, list[str]], lost: list[Task], suspects: set[str],
-                     pending: dict[str, Task], done: set[str], workers: dict) -> None:
+    def _worker_died(self, b: _Build, lost: list[Task], workers: dict) -> None:
         """A worker process died (killed, out of memory, a crash in native code) and its
         pool with it. A task that was running alone killed it: it fails. Tasks that were
         running side by side go back to wait and run one at a time until each has
@@ -389,18 +460,17 @@ class Scheduler:
             shutil.rmtree(self.build / ".staging" / task.key, ignore_errors=True)
         if len(lost) == 1:
             task = lost[0]
-            suspects.discard(task.name)
-            self._fail(report, broken, task, {"error": "its worker process died" + _death(workers), "kind": "worker"})
-            done.add(task.name)
+            b.suspects.discard(task.name)
+            self._fail(b, task, {"error": "its worker process died" + _death(workers), "kind": "worker"})
+            b.done.add(task.name)
             return
         names = {t.name for t in lost}
-        report.explanations[:] = [e for e in report.explanations if e["task"] not in names]
+        b.report.explanations[:] = [e for e in b.report.explanations if e["task"] not in names]
         for task in lost:
-            suspects.add(task.name)
-            pending[task.name] = task
+            b.suspects.add(task.name)
+            b.pending[task.name] = task
 
-    def _warm_idle(self, pool, running: dict, warming: list[tuple[Future, tuple[str, ...]]],
-                   pending: dict[str, Task], done: set[str]) -> None:
+    def _warm_idle(self, b: _Build) -> None:
         """Workers left idle while the tasks still waiting depend on running ones import
         what the next of those will (Task.warm: of the tasks that wait on running ones
         alone): an edit runs its chain task by task, and each task would otherwise start
@@ -410,13 +480,13 @@ class Scheduler:
         task's modules at once kept the idle worker busy past the next task's start:
         the source task of an edit ran in the worker that had just read the .blend,
         importing its own libraries."""
-        idle = self.jobs - len(running) - sum(not f.done() for f, _ in warming)
-        started = done | {t.name for t in running.values()}
-        modules = tuple(dict.fromkeys(m for t in pending.values() if started.issuperset(t.deps) for m in t.warm))
-        if idle <= 0 or not modules or any(sent == modules for _, sent in warming):
+        idle = self.jobs - len(b.running) - sum(not f.done() for f, _ in b.warming)
+        started = b.done | {t.name for t in b.running.values()}
+        modules = tuple(dict.fromkeys(m for t in b.pending.values() if started.issuperset(t.deps) for m in t.warm))
+        if idle <= 0 or not modules or any(sent == modules for _, sent in b.warming):
             return
         try:
-            warming += [(pool.submit(warm_up, modules), modules) for _ in range(idle)]
+            b.warming += [(b.pool.submit(warm_up, modules), modules) for _ in range(idle)]
         except BrokenExecutor:
             pass  # a worker died: the tasks in flight say so when they are waited for
 
@@ -462,6 +532,17 @@ def _as_failure(problem: Exception) -> dict:
 def _opened(previous: dict | None) -> dict:
     """The files the task's last run opened beyond its inputs (Task.reads_in)."""
     return (previous or {}).get("opened") or {}
+
+
+def _outcome(fut: Future) -> dict | None:
+    """A finished task's result (worker.run_task), the executor's own failure as one,
+    or None: its worker died."""
+    try:
+        return fut.result()
+    except BrokenExecutor:
+        return None
+    except Exception as e:  # noqa: BLE001 - the executor's failure, not the build's
+        return {"ok": False, "error": f"{type(e).__name__}: {e}"}
 
 
 def _stood_on(why: dict, failed: list[str]) -> dict:

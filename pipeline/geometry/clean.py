@@ -272,19 +272,6 @@ def apply_transform(vertices: np.ndarray, faces: np.ndarray, matrix: np.ndarray)
     return v, flip_winding_if_mirrored(faces, m)
 
 
-def transform_mesh(mesh: ir.Mesh, matrix: np.ndarray) -> ir.Mesh:
-    """The Mesh with vertices, shape keys and normals (inverse transpose, renormalised)
-    transformed by `matrix` (4, 4); faces flipped for a mirroring matrix."""
-    m = np.asarray(matrix, dtype=np.float64)
-    v, f = apply_transform(mesh.vertices, mesh.faces, m)
-    normals = None
-    if mesh.normals is not None:
-        n = mesh.normals @ np.linalg.inv(m[:3, :3])  # == (inv(A)^T n^T)^T
-        normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    keys = tuple(ir.ShapeKey(k.name, apply_transform(k.vertices, mesh.faces, m)[0]) for k in mesh.shape_keys)
-    return ir.Mesh(v, f, normals=normals, uvs=mesh.uvs, shape_keys=keys)
-
-
 def clean_mesh(mesh: ir.Mesh, options: CleanOptions = CleanOptions(), file: str = "", obj: str = "") -> ir.Mesh:
     """Weld, drop degenerate and duplicate faces, orient; UserError(file, obj) on NaN.
 

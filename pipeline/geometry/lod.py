@@ -16,7 +16,7 @@ import numpy as np
 from .. import ir
 from ..errors import UserError
 from . import clean as _clean
-from .simplify import ITERATIONS, METHODS, Memo, Simplified, Workers, simplify_levels
+from .simplify import ITERATIONS, METHODS, Memo, Simplified, Parallelism, simplify_levels
 from .transform import linear_scale
 
 # What the checks hold against one mesh on its own: its error codes, and its
@@ -44,7 +44,7 @@ def frozen_visuals(asset: ir.Asset) -> set[str]:
 
 
 def lod_chain(options: LodOptions = LodOptions(), memo: Memo | None = None, verdict: Verdict | None = None,
-              workers: Workers = Workers()) -> Callable[[ir.Asset], ir.Asset]:
+              workers: Parallelism = Parallelism()) -> Callable[[ir.Asset], ir.Asset]:
     """Step: Visual.lods = (authored, LOD1, ..., LODk) and Asset.lods = LodInfo for
     levels 0..k (level 0: the authored meshes, budget and error 0).
 
@@ -98,7 +98,7 @@ def lod_chain(options: LodOptions = LodOptions(), memo: Memo | None = None, verd
 
 
 def _group_chain(group: list[ir.Visual], budgets, options: LodOptions, link_scale: float, memo: Memo | None,
-                 verdict: Verdict | None, workers: Workers):
+                 verdict: Verdict | None, workers: Parallelism):
     """LOD chains of visuals simplified as one mesh in their link's frame.
     Returns ({visual name: [mesh per level]}, errors per level in the model frame)."""
     poses = [v.pose for v in group]

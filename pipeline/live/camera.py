@@ -11,11 +11,11 @@ import numpy as np
 from ..datasets.plan import aim, mast_eye
 from ..geometry.pinhole import look_at
 from ..runtime import camera as camera_model
-from ..runtime.site import Site
+from ..runtime.site import BuiltSite
 
 
 class LiveCamera:
-    def __init__(self, site: Site, presets: dict[str, tuple[str, str, float | None]] | None = None):
+    def __init__(self, site: BuiltSite, presets: dict[str, tuple[str, str, float | None]] | None = None):
         """presets: name -> (mast tag, target tag, preset zoom or None)."""
         self.site = site
         self.presets = dict(presets or {})

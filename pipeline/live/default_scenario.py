@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .. import sun as sun_model
 from ..runtime import graph
-from ..runtime.site import Site
+from ..runtime.site import BuiltSite
 
 DEFAULT_AEROSOL = 1.0  # Blender's sky default: the dataset samples around it
 
@@ -20,7 +20,7 @@ def switch_node(tag: str) -> str:
     return "switch_" + "".join(c if c.isalnum() or c == "_" else "_" for c in tag)
 
 
-def switchgear(site: Site) -> list[str]:
+def switchgear(site: BuiltSite) -> list[str]:
     """Tags of the placements a `twin dataset` opens and closes (revolute joints,
     category switchgear), sorted."""
     out = []
@@ -31,7 +31,7 @@ def switchgear(site: Site) -> list[str]:
     return sorted(out)
 
 
-def default_scenario(site: Site, start: dt.datetime, step_s: float = 1.0, seed: int = 0) -> graph.Scenario:
+def default_scenario(site: BuiltSite, start: dt.datetime, step_s: float = 1.0, seed: int = 0) -> graph.Scenario:
     lat, lon = site.origin[0], site.origin[1]
     nodes = [
         {"id": "clock", "type": "clock", "period_s": step_s},

@@ -13,7 +13,7 @@ from ..render.sensor import frame_seed
 from ..render.frames import shot_key
 from ..runtime import graph
 from ..runtime.nodes import Observed, VisualMapper
-from ..runtime.site import Shot, Site
+from ..runtime.site import BuiltSite, Shot
 from .camera import LiveCamera
 from .default_scenario import DEFAULT_AEROSOL, switch_node, switchgear
 from .ports import PortSpec, check_value, port_table
@@ -21,7 +21,7 @@ from .ports import PortSpec, check_value, port_table
 MAX_CATCH_UP = 1000  # steps run one by one when the clock is ahead; further, the graph jumps
 
 
-def observed_placements(site: Site) -> list[Observed]:
+def observed_placements(site: BuiltSite) -> list[Observed]:
     """Placements whose manifest binds state, keyed by STATE (or by TAG without one), as
     `twin dataset` drives them."""
     return [Observed(p["tag"], p.get("state") or p["tag"], p["asset"], site.manifests[p["asset"]])
@@ -29,7 +29,7 @@ def observed_placements(site: Site) -> list[Observed]:
 
 
 class LiveTwin:
-    def __init__(self, scenario: graph.Scenario, site: Site, camera: LiveCamera):
+    def __init__(self, scenario: graph.Scenario, site: BuiltSite, camera: LiveCamera):
         self.scenario, self.site, self.camera = scenario, site, camera
         self.graph = graph.Graph(scenario)
         self.engine = graph.Engine(self.graph)

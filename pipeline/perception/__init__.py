@@ -2,7 +2,8 @@
 test keeps bpy out of everything this folder reaches).
 
 - metrics:      the study's image metrics C, S and H on a gauge crop (PAPER_NOTES.md)
-- gauge:        a dial's geometry in its model and the pointer's mapping
+- gauge:        the one dial model: a dial from its placement's pointer binding (centre,
+                normal, radii, the level -> angle map), its rim and box in a frame
 - gauge_reader: the study's gauge reader, made to read a dial from any view
 - baseline:     `twin baseline`, the reader over a dataset's conditions
 

@@ -29,7 +29,8 @@ import numpy as np
 
 from ..errors import UserError
 from ..files import atomic_write
-from .gauge_reader import DARK_OF_FACE, DARK_V, MIN_DIAL_PX, READERS, SCORED, STATUS_READ, UNREADABLE, Dial, dial_of, score_gauge
+from .gauge import Dial, dial_of
+from .gauge_reader import DARK_OF_FACE, DARK_V, MIN_DIAL_PX, READERS, SCORED, STATUS_READ, UNREADABLE, score_gauge
 
 # --- a dataset ------------------------------------------------------------------------------------
 

@@ -1,9 +1,9 @@
 """Gauge readers on one dial of one image: the dial from its placement's pointer
 binding, the ROI from its projected rim, the study's C, S and pointer extent
-(frames.measure) on it, and the level a reader infers: the ray from the pivot along
+(metrics.measure) on it, and the level a reader infers: the ray from the pivot along
 which the face's dark pixels run, mapped through the inverse of the binding's
 level -> angle map. A dial narrower than MIN_DIAL_PX, or not wholly in the frame, is
-counted and not scored. The dial comes from the binding's rest pose and axis, so every
+counted and not scored. The dial (gauge.dial_of) comes from the binding's rest pose and axis, so every
 bound dial is read where it is, the transformers' too.
 
 Two readers differ in what "dark" is. `study`: the study's fixed V <= 80 (its H
@@ -18,12 +18,11 @@ projected row extent in the same view (baseline.py says why this reference).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from .metrics import measure
-from .gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
+from .gauge import FACE_RADIUS, Dial
 from ..geometry.pinhole import project
 
 MIN_DIAL_PX = 24  # the face's projected minor axis below which a dial is counted, not read
@@ -53,42 +52,8 @@ UNREADABLE = ("no_pointer", "dark_face", "no_line")
 READERS = ("relative", "study")
 
 
-@dataclass(frozen=True)
-class Dial:
-    """A dial in the world: the pointer's pivot, the plane it turns in and its binding.
-    up: the pointer's direction at angle 0; left = axis x up, its direction at +90 deg
-    (the binding turns it about `axis`, right-handed). centre, axis, up, left: (3,)."""
-
-    centre: np.ndarray
-    axis: np.ndarray
-    up: np.ndarray
-    left: np.ndarray
-    binding: dict
-
-    def direction(self, angle: float) -> np.ndarray:
-        return math.cos(angle) * self.up + math.sin(angle) * self.left
-
-
-def dial_of(placement_pose: np.ndarray, manifest: dict) -> Dial | None:
-    """The dial of a placement whose manifest binds POINTER to a rotation, or None."""
-    b = next((r for r in manifest.get("bindings", []) if r["target"] == POINTER and r["effect"] == "rotate"), None)
-    if b is None:
-        return None
-    link = next((np.array(r["pose"], float).reshape(4, 4) for r in manifest.get("links", [])
-                 if r["name"] == b.get("link")), np.eye(4))
-    rest = np.array(b.get("rest_pose") or np.eye(4).reshape(16), float).reshape(4, 4)
-    world = placement_pose @ link @ rest
-    a = np.asarray(b["axis"], float)
-    a /= np.linalg.norm(a)
-    y0 = np.array([0.0, 1.0, 0.0]) - a[1] * a  # the pointer's rest direction, in the turning plane
-    y0 /= np.linalg.norm(y0)
-    r = world[:3, :3]
-    axis, up = r @ a, r @ y0
-    return Dial(world[:3, 3].copy(), axis, up, np.cross(axis, up), b)
-
-
 def level_of_angle(angle: float, binding: dict) -> float:
-    """The inverse of gauge.pointer_angle: the level (clamped to the domain) whose
+    """The inverse of the binding's level -> angle map (gauge.pointer_angle): the level (clamped to the domain) whose
     pointer angle is `angle` (rad, taken within a turn of the range's middle)."""
     (d0, d1), (r0, r1) = binding["domain"], binding["range"]
     mid = (r0 + r1) / 2.0
@@ -115,12 +80,6 @@ def dial_plane_coordinates(dial: Dial, cam_pose: np.ndarray, k: dict, box: tuple
     out = np.stack([hit @ dial.left, hit @ dial.up], axis=-1)
     out[~(t > 0)] = np.nan
     return out
-
-
-def circle(dial: Dial, radius: float, n: int = 64) -> np.ndarray:
-    """(n, 3) world points on a circle of `radius` about the pivot in the dial's plane."""
-    a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
-    return dial.centre + radius * (np.cos(a)[:, None] * dial.up + np.sin(a)[:, None] * dial.left)
 
 
 def minor_axis_px(uv: np.ndarray) -> float:
@@ -209,8 +168,8 @@ def score_gauge(bgr: np.ndarray, dial: Dial, cam_pose: np.ndarray, k: dict, trut
     """The ROI, C, S, pointer extent, H and each reader's level of one dial in one image
     (bgr: (h, w, 3) uint8). row["status"]: SCORED, or one of NOT_SCORED (then no reader
     ran); row[reader] = {status: read or one of UNREADABLE, angle_rad, read, error}."""
-    face_uv = project(circle(dial, FACE_RADIUS), cam_pose, k)
-    rim_uv = project(circle(dial, DIAL_RADIUS), cam_pose, k)
+    face_uv = project(dial.circle(dial.face_radius), cam_pose, k)
+    rim_uv = project(dial.circle(dial.rim_radius), cam_pose, k)
     row = {"dial_px": round(minor_axis_px(face_uv), 3)}
     if np.isnan(rim_uv).any():
         return {**row, "status": "cut"}
@@ -226,7 +185,7 @@ def score_gauge(bgr: np.ndarray, dial: Dial, cam_pose: np.ndarray, k: dict, trut
     face_only = crop.copy()
     face_only[~face] = 128  # neither red, white nor dark for the H masks (study.face_only)
     m = measure(crop, face_only)
-    true_angle = None if truth is None else pointer_angle(truth, dial.binding)
+    true_angle = None if truth is None else dial.angle(truth)
     true_rows = pointer_rows_px(dial, true_angle, cam_pose, k) if true_angle is not None else None
     value = crop.max(axis=2)  # HSV's V is the largest of B, G, R
     face_values = value[face]

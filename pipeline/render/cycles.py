@@ -18,7 +18,7 @@ from .. import sun as sun_model
 from ..perception.gauge import POINTER
 from ..geometry.pinhole import look_at, project
 from .sensor import PhoneCamera
-from ..runtime.site import Shot, Site
+from ..runtime.site import Shot, BuiltSite
 
 class CyclesScene:
     """One Cycles scene: imported packages, lights, camera. Packages are imported once
@@ -31,7 +31,7 @@ class CyclesScene:
     LAMP_W = 5000.0  # W (radiant) per floodlight head, spot 70 degrees
     THREADS = 2
 
-    def __init__(self, site: Site, cam: PhoneCamera, seed: int):
+    def __init__(self, site: BuiltSite, cam: PhoneCamera, seed: int):
         import bpy
 
         self.bpy, self.site, self.cam = bpy, site, cam
@@ -217,7 +217,7 @@ class CyclesScene:
                     self.lamps.append(ob)
 
     # -- per frame
-    def set_shot(self, shot: Shot, pointer_binding: dict | None) -> None:
+    def set_shot(self, shot: Shot) -> None:
         bpy = self.bpy
         cam = self.camera
         cam.matrix_world = _matrix(bpy, shot.cam_pose)

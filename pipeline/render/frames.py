@@ -14,18 +14,17 @@ import numpy as np
 
 from ..files import atomic_write
 from .cycles import CyclesScene
-from ..perception.gauge import POINTER, gauge_box, pointer_angle
+from ..perception.gauge import Dial, placed_dial
 from ..geometry.pinhole import cull, intrinsics
 from .sensor import PhoneCamera, develop, frame_seed, lens_glare, metered_gain, metered_white_balance
-from ..runtime.site import Shot, Site
+from ..runtime.site import Shot, BuiltSite
 
-def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, pointer_binding: dict | None) -> dict:
-    """Labels of one frame: what was rendered, in numbers."""
+def frame_labels(shot: Shot, k: dict, site: BuiltSite, gain: float, veil: float, dial: Dial | None) -> dict:
+    """Labels of one frame: what was rendered, in numbers (`dial`: the target's, gauge.placed_dial)."""
     pose = shot.cam_pose
-    target_pose = site.pose(site.placement(shot.target))
     levels = shot.states.get(shot.target, {})
     level = levels.get("oil_level_tank")
-    gauges = {"gauge_tank": gauge_box(target_pose, pose, k)}
+    gauges = {"gauge_tank": dial.box(pose, k) if dial is not None else {"box": None, "visible": False}}
     return {
         "time": shot.when.isoformat(),
         "time_utc": shot.when.astimezone(dt.timezone.utc).isoformat(),
@@ -36,7 +35,7 @@ def frame_labels(shot: Shot, k: dict, site: Site, gain: float, veil: float, poin
                    "exposure_gain": gain, "veil": veil},
         "target": shot.target,
         "oil_levels": {v: float(x) for v, x in sorted(levels.items())},
-        "pointer_angle_rad": pointer_angle(level, pointer_binding) if level is not None and pointer_binding else None,
+        "pointer_angle_rad": dial.angle(level) if level is not None and dial is not None else None,
         "gauges": gauges,
     }
 
@@ -63,12 +62,7 @@ def write_json(path: Path, data) -> None:
 
 
 
-def pointer_binding(site: Site, tag: str) -> dict | None:
-    m = site.manifests.get(site.placement(tag)["asset"], {})
-    return next((b for b in m.get("bindings", []) if b["target"] == POINTER and b["effect"] == "rotate"), None)
-
-
-def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamera, seed: int,
+def render_shots(site: BuiltSite, shots: list[Shot], folder: Path, *, cam: PhoneCamera, seed: int,
                  gain: float | None = None, names: list[str] | None = None, meter_each: bool = False,
                  progress=None) -> list[dict]:
     """Render shots into folder/<name>.png + <name>.json; one scene (loaded once, kept
@@ -96,7 +90,7 @@ def render_shots(site: Site, shots: list[Shot], folder: Path, *, cam: PhoneCamer
         bl.close()
 
 
-def populate(bl: CyclesScene, site: Site, shots: list[Shot]) -> None:
+def populate(bl: CyclesScene, site: BuiltSite, shots: list[Shot]) -> None:
     """Load what any shot's camera sees or what shadows into it, the targets at least,
     and the lighting poles near the targets as lamps."""
     spheres = site.spheres()
@@ -140,16 +134,15 @@ def develop_shot(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCame
     return rgb, gain, wb, float(veil.mean())
 
 
-def _one(bl: CyclesScene, site: Site, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
+def _one(bl: CyclesScene, site: BuiltSite, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:
     """One frame; `lock` = (gain, white balance) of a locked exposure, or None to meter."""
-    binding = pointer_binding(site, shot.target)
-    bl.set_shot(shot, binding)
+    bl.set_shot(shot)
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
     t0 = time.perf_counter()
     linear = bl.render()
     seconds = time.perf_counter() - t0
     rgb, gain, wb, veil = develop_shot(bl, shot, linear, cam, lock, frame_seed(bl.scene.cycles.seed, shot_key(shot)))
-    labels = frame_labels(shot, k, site, gain, veil, binding)
+    labels = frame_labels(shot, k, site, gain, veil, placed_dial(site, shot.target))
     labels["pointer_rows_px"] = bl.pointer_rows(shot.target, shot.cam_pose, k)
     labels["camera"]["white_balance"] = [float(v) for v in wb]
     labels["render_s"] = seconds

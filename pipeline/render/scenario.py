@@ -8,12 +8,12 @@ from pathlib import Path
 
 from ..runtime import camera as camera_model
 from .frames import render_shots, write_json
-from ..perception.gauge import dial_world
+from ..perception.gauge import placed_dial
 from ..geometry.pinhole import look_at
 from .sensor import PhoneCamera
-from ..runtime.site import Shot, Site, load_site
+from ..runtime.site import Shot, BuiltSite, load_site
 
-def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[object, list[Shot]]:
+def scenario_shots(scenario_path: Path, site: BuiltSite, every: int = 1) -> tuple[object, list[Shot]]:
     """Run the scenario's graph and turn each (every-th) step into a Shot: camera at the
     inspection point whose target is the placement the render node drives, looking at
     its main-tank gauge; zoom, sun and states from the graph's nodes."""
@@ -30,8 +30,10 @@ def scenario_shots(scenario_path: Path, site: Site, every: int = 1) -> tuple[obj
     point = next((p for p in site.inspection.values() if p["target"] == target), None)
     if point is None:
         raise UserError(scenario.path, target, "no inspection point in site.toml targets this placement")
-    centre, _ = dial_world(site.pose(site.placement(target)))
-    pose = look_at(point["enu"], centre)
+    dial = placed_dial(site, target)
+    if dial is None:
+        raise UserError(scenario.path, target, "the placement the render node drives has no gauge to look at")
+    pose = look_at(point["enu"], dial.centre)
     cams = sorted(n["id"] for n in scenario.nodes if n["type"] == "camera")
     shots = []
     for i, (t, frame, rec) in enumerate(zip(data.times, data.frames, records)):

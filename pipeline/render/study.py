@@ -17,10 +17,10 @@ from ..runtime import camera as camera_model
 from .. import sun as sun_model
 from ..perception.metrics import measure
 from .frames import render_shots, write_json
-from ..perception.gauge import FACE_RADIUS, dial_outline, dial_world
+from ..perception.gauge import placed_dial
 from ..geometry.pinhole import intrinsics, look_at, project
 from .sensor import PhoneCamera
-from ..runtime.site import Shot, Site, load_site
+from ..runtime.site import Shot, BuiltSite, load_site
 
 CONFIG = "study.toml"  # in the sources folder
 NOON = "solar_noon"  # a condition's time: the site's solar noon on its date
@@ -40,61 +40,32 @@ class StudyConfig:
     conditions: tuple[tuple[str, str], ...]  # (name, "HH:MM" or NOON), in the sequence's order
 
 
-_KEYS = {"target", "zoom", "distance_m", "max_obliquity_deg", "faces_sun_of", "seed", "conditions"}
-
-
 def load_study(path: Path) -> StudyConfig:
-    """Read and check a study.toml (SOURCES/study.toml); a UserError names the file
-    and the key."""
-    from ..errors import UserError
+    """Read a study.toml (SOURCES/study.toml) against schemas/study.schema.json, then
+    check what a schema cannot say; every problem at once, in one UserError naming
+    the file and each key."""
+    from ..errors import raise_all
 
     path = Path(path)
-    data = config.read_toml(path)
-    unknown = sorted(set(data) - _KEYS)
-    if unknown:
-        raise UserError(path, unknown[0], f"unknown key (known: {', '.join(sorted(_KEYS))})")
-
-    def number(key: str, lo: float, hi: float) -> float:
-        v = data.get(key)
-        if v is None:
-            raise UserError(path, key, "missing")
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
-            raise UserError(path, key, f"{v!r}: a number in [{lo:g}, {hi:g}] is expected")
-        return float(v)
-
-    target = data.get("target")
-    if not isinstance(target, str) or not target:
-        raise UserError(path, "target", "missing: the tag of the placement whose gauge is read" if target is None
-                        else f"{target!r}: a placement's tag (text) is expected")
-    seed = data.get("seed")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise UserError(path, "seed", f"{seed!r}: a whole number >= 0 is expected")
-    conditions = _conditions(path, data.get("conditions"))
-    faces = data.get("faces_sun_of")
-    if faces not in dict(conditions):
-        raise UserError(path, "faces_sun_of", f"{faces!r}: the name of one of the conditions is expected")
-    return StudyConfig(path, target, number("zoom", camera_model.ZOOM_MIN, camera_model.ZOOM_MAX),
-                       number("distance_m", 1.0, 1000.0), math.radians(number("max_obliquity_deg", 0.0, 89.0)),
-                       faces, seed, conditions)
+    data = config.read_config(path, "study")
+    conditions = tuple((c["name"], c["time"]) for c in data["conditions"])
+    raise_all(path, _problems(data, conditions))
+    return StudyConfig(path, data["target"], float(data["zoom"]), float(data["distance_m"]),
+                       math.radians(data["max_obliquity_deg"]), data["faces_sun_of"], data["seed"], conditions)
 
 
-def _conditions(path: Path, raw) -> tuple[tuple[str, str], ...]:
-    from ..errors import UserError
-
-    if not isinstance(raw, list) or not raw:
-        raise UserError(path, "conditions", "missing: one [[conditions]] table per condition (name, time)")
-    out = []
-    for i, c in enumerate(raw):
-        key = f"conditions[{i}]"
-        if not isinstance(c, dict) or set(c) != {"name", "time"}:
-            raise UserError(path, key, "a table with exactly the keys name and time is expected")
-        name, time = c["name"], c["time"]
-        if not isinstance(name, str) or not name or name in dict(out):
-            raise UserError(path, f"{key}.name", f"{name!r}: a name used by no other condition is expected")
-        if time != NOON and not (isinstance(time, str) and _hhmm(time) is not None):
-            raise UserError(path, f"{key}.time", f"{time!r}: a local time \"HH:MM\" or \"{NOON}\" is expected")
-        out.append((name, time))
-    return tuple(out)
+def _problems(data: dict, conditions: tuple[tuple[str, str], ...]) -> list[tuple[str, str]]:
+    """Condition names used once, real times, faces_sun_of one of the conditions."""
+    out, names = [], set()
+    for i, (name, time) in enumerate(conditions):
+        if name in names:
+            out.append((f"conditions[{i}].name", f"{name!r}: a name used by no other condition is expected"))
+        names.add(name)
+        if time != NOON and _hhmm(time) is None:
+            out.append((f"conditions[{i}].time", f"{time!r}: a local time \"HH:MM\" or \"{NOON}\" is expected"))
+    if data["faces_sun_of"] not in names:
+        out.append(("faces_sun_of", f"{data['faces_sun_of']!r}: the name of one of the conditions is expected"))
+    return out
 
 
 def _hhmm(text: str) -> dt.time | None:
@@ -105,7 +76,7 @@ def _hhmm(text: str) -> dt.time | None:
         return None
 
 
-def study_times(site: Site, cfg: StudyConfig) -> list[tuple[str, dt.datetime]]:
+def study_times(site: BuiltSite, cfg: StudyConfig) -> list[tuple[str, dt.datetime]]:
     import astral
     import astral.sun
 
@@ -147,7 +118,7 @@ def _ray_hits_box(origin: np.ndarray, direction: np.ndarray, length: float, pose
     return True
 
 
-def _blocked(site: Site, origin: np.ndarray, direction: np.ndarray, length: float, skip: str = "") -> bool:
+def _blocked(site: BuiltSite, origin: np.ndarray, direction: np.ndarray, length: float, skip: str = "") -> bool:
     """Does a built placement's bounding box (other than `skip`) cut the segment?"""
     for p in site.placements:
         m = site.manifests.get(p["asset"])
@@ -161,7 +132,7 @@ def _blocked(site: Site, origin: np.ndarray, direction: np.ndarray, length: floa
     return False
 
 
-def study_viewpoint(site: Site, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray:
+def study_viewpoint(site: BuiltSite, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray:
     """The study's camera pose: cfg.distance_m from the target's main-tank dial, at a
     phone's height (1.6 m above the reactor's level), turned from the dial's normal
     towards `sun` (the sun of cfg.faces_sun_of) as far as cfg.max_obliquity allows, so
@@ -169,7 +140,8 @@ def study_viewpoint(site: Site, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray
     line of sight to the dial and the sun itself stay clear of the built models' bounding
     boxes (a sun hidden behind the reactor would make no glare)."""
     p = site.placement(cfg.target)
-    centre, normal = dial_world(site.pose(p))
+    dial = placed_dial(site, cfg.target)
+    centre, normal = dial.centre, dial.axis
     candidates = []
     for a in np.linspace(-cfg.max_obliquity, cfg.max_obliquity, 91):
         c, s = math.cos(a), math.sin(a)
@@ -188,7 +160,7 @@ def study_viewpoint(site: Site, sun: np.ndarray, cfg: StudyConfig) -> np.ndarray
     return look_at(best[3], centre)
 
 
-def study_shots(site: Site, cfg: StudyConfig, *,
+def study_shots(site: BuiltSite, cfg: StudyConfig, *,
                 tau_atm: float = sun_model.DEFAULT_TAU_ATM) -> list[tuple[str, Shot]]:
     """The study's shots (PAPER_NOTES.md): same camera, one instant per condition; the
     tank level follows the study's leak trace over the sequence so H has something to
@@ -198,6 +170,8 @@ def study_shots(site: Site, cfg: StudyConfig, *,
     if not any(p["tag"] == cfg.target for p in site.placements) \
             or site.placement(cfg.target)["asset"] not in site.manifests:
         raise UserError(cfg.path, "target", f"{cfg.target!r} is not a built placement of {site.build}")
+    if placed_dial(site, cfg.target) is None:
+        raise UserError(cfg.path, "target", f"{cfg.target!r} has no gauge (no binding turns its pointer)")
     times = study_times(site, cfg)
     lat, lon = site.origin[0], site.origin[1]
     suns = []
@@ -231,13 +205,14 @@ def study_roi(record: dict) -> tuple[int, int, int, int]:
     return int(math.floor(x0)), int(math.floor(y0)), int(math.ceil(x1)), int(math.ceil(y1))
 
 
-def face_only(bgr_crop: np.ndarray, site: Site, shot: Shot, cam: PhoneCamera, offset) -> np.ndarray:
+def face_only(bgr_crop: np.ndarray, site: BuiltSite, shot: Shot, cam: PhoneCamera, offset) -> np.ndarray:
     """The crop with everything outside the projected dial face set to a neutral grey
     (neither red, white nor dark for the H masks)."""
     import cv2
 
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
-    uv = project(dial_outline(site.pose(site.placement(shot.target)), 64, FACE_RADIUS * 0.97), shot.cam_pose, k)
+    dial = placed_dial(site, shot.target)
+    uv = project(dial.circle(dial.face_radius * 0.97, 64), shot.cam_pose, k)
     poly = np.round(uv - np.asarray(offset, float)).astype(np.int32)
     mask = np.zeros(bgr_crop.shape[:2], np.uint8)
     cv2.fillPoly(mask, [poly], 1)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 from .. import config
 from ..errors import UserError
-from .nodes import NODE_TYPES, Context, Node
+from .nodes import NODE_TYPES, RunContext, Node
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,7 @@ class Graph:
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
         f = scenario.path
-        self.ctx = Context(seed=scenario.seed, start=scenario.start, step_s=scenario.step_s, zone=scenario.zone)
+        self.ctx = RunContext(seed=scenario.seed, start=scenario.start, step_s=scenario.step_s, zone=scenario.zone)
         self.nodes: dict[str, Node] = {}
         self.period_steps: dict[str, int | None] = {}
         for i, spec in enumerate(scenario.nodes):

@@ -32,7 +32,7 @@ class Port:
 
 
 @dataclass(frozen=True)
-class Context:
+class RunContext:
     """What every node may know about the run besides its inputs."""
 
     seed: int
@@ -78,7 +78,7 @@ class Node:
     outputs: ClassVar[dict[str, Port]] = {}
     params: ClassVar[dict[str, object]] = {}
 
-    def __init__(self, node_id: str, params: dict, ctx: Context):
+    def __init__(self, node_id: str, params: dict, ctx: RunContext):
         unknown = sorted(set(params) - set(self.params))
         if unknown:
             raise ValueError(f"unknown parameter(s) {', '.join(unknown)} for a {self.type_name} node "

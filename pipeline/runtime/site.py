@@ -1,4 +1,4 @@
-"""What the renderer reads from a build and site.toml (the Site), and what one frame
+"""What the renderer reads from a build and site.toml (the BuiltSite), and what one frame
 needs, free of bpy (the Shot)."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from . import camera as camera_model
 from .. import sun as sun_model
 
 @dataclass
-class Site:
+class BuiltSite:
     """What the renderer reads from a build (placements.json, manifests) and site.toml."""
 
     build: Path
@@ -55,7 +55,7 @@ class Site:
         return out
 
 
-def load_site(build: Path, sources: Path) -> Site:
+def load_site(build: Path, sources: Path) -> BuiltSite:
     from ..errors import UserError
     from ..export import manifest as manifest_io
 
@@ -70,7 +70,7 @@ def load_site(build: Path, sources: Path) -> Site:
             manifests[asset] = manifest_io.read(build / "models" / asset)
     o = data["origin"]
     origin = (o["latitude_deg"], o["longitude_deg"], o["height_m"])
-    site = Site(build, data["placements"], manifests, origin, "2025-03-20")
+    site = BuiltSite(build, data["placements"], manifests, origin, "2025-03-20")
     if data.get("timezone"):
         site.zone = config.time_zone(data["timezone"], index, "timezone")
     terrain = data.get("terrain")
@@ -82,7 +82,7 @@ def load_site(build: Path, sources: Path) -> Site:
     return site
 
 
-def _add_site_toml(site: Site, path: Path) -> None:
+def _add_site_toml(site: BuiltSite, path: Path) -> None:
     """Inspection points in ENU through the same georeferencer the build used."""
     from ..georef import Georeferencer
     from ..scene.placements import inspection_points_enu

@@ -13,12 +13,12 @@ Modules, each using only those before it:
             pymeshlab; fast_simplification)
   judge     a candidate measured against the original: error, flips, added edges
   search    the level search (rounds of simplify, measure, lock) and its side-by-side
-            form (`Workers`, `Board`)
+            form (`Parallelism`, `Board`)
   memo      what a level's search leaves and its keys in a caller's memo
   pieces    splitting a large mesh into pieces and joining their levels
   levels    simplify_levels: all of the above for one mesh
 
-It knows `ir`, numpy, scipy and the rest of `geometry`: parallelism (`Workers`) and
+It knows `ir`, numpy, scipy and the rest of `geometry`: how parts run side by side (`Parallelism`) and
 the memo (`Memo`) come from the caller.
 """
 
@@ -26,7 +26,7 @@ from .backends import METHODS, simplify_to_count
 from .judge import MEASURE_SAMPLES, Judge, Simplified, flipped_face_count
 from .levels import simplify, simplify_checked, simplify_levels
 from .memo import Memo
-from .search import ITERATIONS, Workers
+from .search import ITERATIONS, Parallelism
 
-__all__ = ["ITERATIONS", "MEASURE_SAMPLES", "METHODS", "Judge", "Memo", "Simplified", "Workers", "flipped_face_count",
+__all__ = ["ITERATIONS", "MEASURE_SAMPLES", "METHODS", "Judge", "Memo", "Parallelism", "Simplified", "flipped_face_count",
            "simplify", "simplify_checked", "simplify_levels", "simplify_to_count"]

@@ -14,7 +14,7 @@ from . import pieces as _pieces
 from .backends import METHODS
 from .judge import MEASURE_SAMPLES, Judge, Simplified
 from .memo import Level, LevelKeys, Memo, ceiling_after, level_arrays, recall
-from .search import ITERATIONS, Workers, search_count, search_levels
+from .search import ITERATIONS, Parallelism, search_count, search_levels
 
 # Below this many triangles a level saves nothing worth a measurement.
 MIN_FACES = 64
@@ -44,7 +44,7 @@ def simplify_checked(vertices: np.ndarray, faces: np.ndarray, budget_m: float, m
 def simplify_levels(vertices: np.ndarray, faces: np.ndarray, budgets_m, method: str = "meshoptimizer",
                     iterations: int = ITERATIONS, samples: int = MEASURE_SAMPLES, normals: np.ndarray | None = None,
                     parts: np.ndarray | None = None, memo: Memo | None = None,
-                    workers: Workers = Workers()) -> list[Simplified]:
+                    workers: Parallelism = Parallelism()) -> list[Simplified]:
     """The coarsest checked simplification of a CLEAN mesh within each of the
     ascending `budgets_m` (metres), one per budget, each no finer than the one before.
 
@@ -128,7 +128,7 @@ class PieceSearch:
     def done(self) -> bool:
         return len(self.levels) == len(self.budgets)
 
-    def search(self, iterations: int, workers: Workers = Workers()) -> list[Level | None]:
+    def search(self, iterations: int, workers: Parallelism = Parallelism()) -> list[Level | None]:
         """The levels the memo lacks (not kept yet: see keep), side by side as `workers` allow."""
         judge = Judge(self.vertices, self.faces, self.samples, self.parts)
         found = search_levels(judge, self.budgets[len(self.levels):], iterations,
@@ -143,7 +143,7 @@ class PieceSearch:
             self.levels.append(level)
 
 
-def run_searches(searches: list[PieceSearch], iterations: int, workers: Workers = Workers()) -> None:
+def run_searches(searches: list[PieceSearch], iterations: int, workers: Parallelism = Parallelism()) -> None:
     """Search what the memo lacks. A single piece to search (a whole mesh, or the one
     piece an edit touched) searches its levels side by side; several go to as many
     bins as `workers` has cores, largest first to the lightest bin, each bin's pieces

@@ -4,7 +4,7 @@ per budget, each level no finer than the one before.
 meshoptimizer is error-driven: its error target is scaled and vertices around misses
 are locked, round after round (`search_meshopt`). The count-driven simplifiers bisect
 on the triangle count (`search_count`). A mesh's levels are searched one after the
-other, or side by side when the caller gives the search cores (`Workers`), each level
+other, or side by side when the caller gives the search cores (`Parallelism`), each level
 learning its ceiling from a shared board (`Board`) as the finer levels finish.
 """
 
@@ -38,7 +38,7 @@ def in_order(parts: list[Callable[[], T]]) -> list[T]:
 
 
 @dataclass(frozen=True)
-class Workers:
+class Parallelism:
     """How the caller lets a search run its independent parts: `cores`, how many
     cores it may keep busy (1: one part after the other); `spread(parts)`, which
     returns [part() for part in parts] run as the caller sees fit (fork_join.spread forks
@@ -144,7 +144,7 @@ def under_ceiling(best: Simplified | None, rounds: list[int], ceiling: int) -> S
 
 
 def search_levels(judge: Judge, budgets, iterations: int, faces: int, locked: np.ndarray | None = None,
-                  workers: Workers = Workers()) -> list[Simplified | None]:
+                  workers: Parallelism = Parallelism()) -> list[Simplified | None]:
     """Each budget's search result (ascending budgets; None: no coarser mesh than the
     finer level's, whose face count is the ceiling). Alone, the levels are searched
     one after the other, each stopping at its ceiling; with more than one core of
