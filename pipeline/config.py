@@ -344,6 +344,7 @@ class AssetConfig:
     bindings: tuple[dict, ...]
     scale: float = 1.0
     tessellation_max_triangles: int = 1_000_000
+    terminals: tuple[tuple[str, tuple[float, float, float]], ...] = ()  # conductor attachment points, model frame
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -375,6 +376,11 @@ def load_asset_config(path: Path, passed: PassedChecks | None = None) -> AssetCo
     budgets = tuple(float(b) for b in data.get("lod", {}).get("budgets_m", [0.005, 0.02, 0.08]))
     if list(budgets) != sorted(budgets):
         raise UserError(path, "lod.budgets_m", "budgets must ascend (LOD1 finest)")
+    terminals = tuple((t["name"], tuple(float(v) for v in t["position"])) for t in data.get("terminals", []))
+    names = [n for n, _ in terminals]
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            raise UserError(path, f"terminals[{i}].name", f"duplicate terminal {n!r}")
     source = path.parent / data["source"]
     if not source.is_file():
         raise UserError(path, "source", f"source file {data['source']!r} not found in {path.parent}")
@@ -394,6 +400,7 @@ def load_asset_config(path: Path, passed: PassedChecks | None = None) -> AssetCo
         lod_budgets_m=budgets,
         collision_mode=data.get("collision", {}).get("mode", "hull_per_link"),
         bindings=tuple(data.get("bindings", [])),
+        terminals=terminals,
         raw=data,
     )
 

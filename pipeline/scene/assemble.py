@@ -19,7 +19,7 @@ from .. import sun as sun_model
 from ..fork_join import beside
 from ..export import names
 from . import placements as placing
-from . import scene_gltf, stage_usd, world_sdf
+from . import conductor_outputs, conductors, scene_gltf, stage_usd, world_sdf
 from .checks import check_placements
 from .terrain import terrain_asset
 
@@ -75,13 +75,17 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     from ..export import manifest
     from .terrain import height_at
 
+    from ..wiring import load_wiring
+
     site, fp, georef = _load(Path(sources), Path(build))
+    wiring = load_wiring(site)
     models = Path(build) / "models"
     used = sorted({p.asset_id for p in fp.placements})
     manifests = {a: manifest.read(models / a) for a in used}
     placed = placing.place(site, list(fp.placements), georef)
     eyes = placing.inspection_points_enu(site, georef)
     placed = placing.choose_lods(placed, manifests, eyes, site)
+    spans = conductors.build(site, wiring, placed, manifests, georef, eyes)
     origin = georef.origin_llh
     sun = scene_sun(site, origin)
     tname = config.terrain_model_name(site)
@@ -90,18 +94,23 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     out = Path(staging) / "scene"
     out.mkdir(parents=True, exist_ok=True)
+    conductors.write_record(out / "conductors.json", spans, wiring)
+    wires = conductor_outputs.sdf_model(spans, out, capsules=wiring.collision == "capsules")
 
     def sdf_and_usd():
         world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
                         terrain_model=tname, sun=sun, models=models,
-                        own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")))
+                        own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")),
+                        extra_models=() if wires is None else (wires,))
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
-                        articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
+                        articulated=frozenset(a for a, m in manifests.items() if m.get("joints")),
+                        extra=lambda site_prim: conductor_outputs.add_usd(site_prim, spans))
 
     def gltf_checks_and_record():
         scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
-                         origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
+                         origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun,
+                         extra=lambda sb: conductor_outputs.add_gltf(sb, spans))
         terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
         findings = check_placements(site, fp, placed, manifests, terrain_z)
         record = _placements_record(site, fp, placed, origin, sun, tname, lod_hist, findings)
@@ -111,7 +120,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     # two halves of about equal cost (USD the largest part of one, glTF of the
     # other) side by side, when a core is spare
     _, finding_count = beside(sdf_and_usd, gltf_checks_and_record)
-    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": finding_count}
+    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": finding_count, "conductors": len(spans)}
 
 
 def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hist: dict, findings: list) -> dict:
