@@ -143,6 +143,7 @@ class FloorplanOptions:
     insert_scale: str = "ignore"
     units: str | None = None
     grid_scale: float = 1.0
+    conductor_layers: tuple[str, ...] = ()  # upper case: their LINEs are conductors ([wiring] layers), not ignored
 
 
 @dataclass(frozen=True)
@@ -305,6 +306,7 @@ def _floorplan_options(data: dict, path: Path) -> FloorplanOptions:
         insert_scale=fp["insert_scale"],
         units=data["plan"].get("units"),
         grid_scale=float(data["plan"]["grid_scale"]),
+        conductor_layers=tuple(sorted({lay["layer"].upper() for lay in data.get("wiring", {}).get("layers", [])})),
     )
 
 

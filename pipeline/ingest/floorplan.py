@@ -122,6 +122,8 @@ def scan_floorplan(path, known_assets: set[str] | None = None, levels: set[str] 
                 platforms.append(_platform(e, path, to_m, by_level))
             except UserError as problem:
                 r.problems.append(problem)
+        elif kind in ("LINE", "LWPOLYLINE") and e.dxf.layer.upper() in options.conductor_layers:
+            pass  # conductors, read by wiring.read_layer_lines
         else:
             ignored[kind] += 1
     _duplicates(r)
