@@ -137,6 +137,9 @@ def load_wiring(site: config.Site) -> Wiring:
     options = config._defaults(config.schema("site")["properties"]["wiring"], dict(raw.get("wiring", {})))
     specs_raw = raw.get("conductors", [])
     types_path = site.root / options["types"]
+    if not types_path.resolve().is_relative_to(site.root.resolve()):
+        # sources are untrusted: a path in them reads nothing outside their folder
+        raise UserError(site.path, "wiring.types", f"{options['types']!r} is outside the sources folder")
     if not specs_raw and not options.get("layers"):
         return Wiring(types_path, {}, float(options["temperature_c"]), float(options["snap_tolerance_m"]),
                       tuple(options["lod_chord_errors_m"]), options["collision"], {}, ())

@@ -264,6 +264,12 @@ def test_unknown_type_is_named(tmp_path):
         wiring.load_wiring(site)
 
 
+def test_types_file_outside_the_sources_is_refused(tmp_path):
+    sources = make_sources(tmp_path / "s", WIRING.replace("[wiring]", '[wiring]\ntypes = "../../etc/passwd"'))
+    with pytest.raises(UserError, match=r"wiring.types: '../../etc/passwd' is outside the sources folder"):
+        wiring.load_wiring(config.load_site(sources / "site.toml"))
+
+
 def test_capsules_when_asked(tmp_path):
     sources = make_sources(tmp_path / "s")
     site, placed, manifests, georef = _scene_inputs(sources, TERMINALS)
