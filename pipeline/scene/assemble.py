@@ -89,7 +89,6 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     origin = georef.origin_llh
     sun = scene_sun(site, origin)
     tname = config.terrain_model_name(site)
-    terrain_manifest = manifest.read(models / tname)
 
     lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     out = Path(staging) / "scene"
@@ -111,8 +110,10 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
         scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
                          origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun,
                          extra=lambda sb: conductor_outputs.add_gltf(sb, spans))
-        terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
-        findings = check_placements(site, fp, placed, manifests, terrain_z)
+        terrain = _terrain_asset(models / tname)
+        en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))
+        findings = check_placements(site, fp, placed, manifests, height_at(terrain, en))
+        findings += _clearance_findings(site, wiring, spans, lambda xy: height_at(terrain, xy))
         record = _placements_record(site, fp, placed, origin, sun, tname, lod_hist, findings)
         (out / "placements.json").write_text(_json_by_line(record))
         return len(findings)
@@ -163,9 +164,22 @@ def _json_by_line(record: dict) -> str:
     return "{\n" + ",\n".join(fields) + "\n}\n"
 
 
-def _terrain_heights(folder: Path, placed, terrain_manifest, height_at) -> np.ndarray:
-    """Terrain z under each placement, read back from the built terrain glTF so the
-    check tests what was written, not what was meant."""
+def _clearance_findings(site, wiring, spans, ground) -> list[dict]:
+    """The conductors' clearance findings (scene.clearance) as dicts, when the
+    sources hold a clearance table."""
+    from ..findings import as_dicts
+    from . import clearance
+
+    table = site.root / site.raw.get("wiring", {}).get("clearances", "clearances.toml")
+    if not spans or not table.is_file() or not table.resolve().is_relative_to(site.root.resolve()):
+        return []
+    found, _ = clearance.check(spans, clearance.load_table(table), ground)
+    return as_dicts(found)
+
+
+def _terrain_asset(folder: Path):
+    """The terrain read back from the built terrain glTF, so the checks test what
+    was written, not what was meant."""
     from .. import ir
 
     doc, binary = glb.read(folder / names.gltf_file(folder.name))
@@ -176,6 +190,4 @@ def _terrain_heights(folder: Path, placed, terrain_manifest, height_at) -> np.nd
         idx = glb.accessor(doc, binary, prim["indices"]).reshape(-1, 3)
         pos = (np.c_[pos, np.ones(len(pos))] @ (m.T @ glb.Z_TO_Y))[:, :3]  # Y-up -> ENU
         visuals.append(ir.Visual(str(ni), "x", (ir.Mesh(pos, idx),)))
-    terrain = ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=visuals),))
-    en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))
-    return height_at(terrain, en)
+    return ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=visuals),))
