@@ -73,15 +73,6 @@ class SpanSpec:
 
 
 @dataclass(frozen=True)
-class LayerLine:
-    """A conductor layer's LINE or LWPOLYLINE: its plan vertices (k, 2) in metres."""
-
-    handle: str
-    layer: str
-    vertices: tuple[tuple[float, float], ...]
-
-
-@dataclass(frozen=True)
 class Wiring:
     """[wiring] of site.toml with defaults, the types, and the spans written out."""
 
@@ -180,30 +171,3 @@ def _listing(problems: list[str]) -> str:
     if len(problems) == 1:
         return problems[0]
     return f"{len(problems)} problems:\n  " + "\n  ".join(problems)
-
-
-def read_layer_lines(path: Path, layers: set[str], options) -> list[LayerLine]:
-    """The LINEs and LWPOLYLINEs of the floor plan's model space on `layers` (upper
-    case), their vertices in plan metres ($INSUNITS or [plan] units, as INSERTs)."""
-    from .ingest.floorplan import _open, _units
-
-    if not layers:
-        return []
-    doc = _open(Path(path))
-    _, to_m = _units(doc, Path(path), options)
-    out = []
-    for e in doc.modelspace():
-        layer = e.dxf.layer.upper()
-        if layer not in layers:
-            continue
-        if e.dxftype() == "LINE":
-            pts = [tuple(e.dxf.start)[:2], tuple(e.dxf.end)[:2]]
-        elif e.dxftype() == "LWPOLYLINE":
-            # OCS -> WCS for an extrusion other than +Z (a mirrored polyline)
-            pts = [tuple(p)[:2] for p in e.vertices_in_wcs()]
-            if e.closed and pts:
-                pts.append(pts[0])
-        else:
-            continue
-        out.append(LayerLine(e.dxf.handle, layer, tuple((float(x) * to_m, float(y) * to_m) for x, y in pts)))
-    return out

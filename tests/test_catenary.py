@@ -173,3 +173,15 @@ def test_change_of_state_matches_the_parabolic_state_equation():
 def test_inextensible_cold_span_that_cannot_shorten_is_an_error():
     with pytest.raises(cat.CatenaryError, match="cannot shorten"):
         cat.change_of_state([0, 0, 0], [40, 0, 0], 15.0, math.inf, 19e-6, 1e6, 15.0, -500.0)
+
+
+def test_segments_for_many_agrees_with_one_at_a_time():
+    curves = [cat.from_tension([0, 0, 20], [60, 0, 14], 9000.0, 15.0),
+              cat.from_sag([0, 0, 10], [30, 0, 10], 6.0),  # slack
+              cat.from_sag([0, 0, 15], [40, 0, 15], 4e-3),  # taut
+              cat.from_tension([0, 0, 14], [0.5, 0, 6], 50.0, 15.0),  # near-vertical
+              cat.from_tension([2, 3, 14], [2, 3, 6], 50.0, 15.0)]  # plumb
+    for tol in (0.001, 0.01, 0.05):
+        n, err = cat.segments_for_many(curves, tol)
+        assert n.tolist() == [cat.segments_for(c, tol) for c in curves]
+        assert np.allclose(err, [cat.chord_error(c, k) for c, k in zip(curves, n)], rtol=1e-9, atol=1e-15)

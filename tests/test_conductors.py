@@ -219,7 +219,7 @@ def _scene_inputs(sources: Path, manifests_terminals: dict[str, list]):
     georef = Georeferencer(site, (-12.7, -38.3, 48.0))
     placed = placing.place(site, list(fp.placements), georef)
     manifests = {a: {"terminals": [{"name": n, "position": p} for n, p in t]} for a, t in manifests_terminals.items()}
-    return site, placed, manifests, georef
+    return site, placed, manifests, georef, fp.conductor_lines
 
 
 TERMINALS = {"pole": [("top", (0, 0, 8.0))], "kiosk": [("pad_a", (-0.3, 0, 1.5)), ("pad_b", (0.3, 0, 1.5))]}
@@ -244,9 +244,9 @@ tension_n = 500.0
     c, d = plan_point(tmp_path, "K-3", (-0.3, 0)), plan_point(tmp_path, "K-3", (0.3, 0))
     lines = [(a, d), (b, c), ((8.0, -3.0), (8.0, 3.0)), ((100.0, 100.0), d)]
     sources = make_sources(tmp_path / "s", bad, lines)
-    site, placed, manifests, georef = _scene_inputs(sources, TERMINALS)
+    site, placed, manifests, georef, lines = _scene_inputs(sources, TERMINALS)
     with pytest.raises(UserError) as e:
-        conductors.build(site, wiring.load_wiring(site), placed, manifests, georef, np.zeros((0, 3)))
+        conductors.build(site, wiring.load_wiring(site), placed, manifests, georef, np.zeros((0, 3)), lines)
     text = str(e.value)
     assert "site.toml: conductors:" in text
     assert "P-9.top~K-1.pad_b" in text and "no placement is tagged 'P-9'" in text
@@ -272,8 +272,8 @@ def test_types_file_outside_the_sources_is_refused(tmp_path):
 
 def test_capsules_when_asked(tmp_path):
     sources = make_sources(tmp_path / "s")
-    site, placed, manifests, georef = _scene_inputs(sources, TERMINALS)
-    spans = conductors.build(site, wiring.load_wiring(site), placed, manifests, georef, np.zeros((0, 3)))
+    site, placed, manifests, georef, lines = _scene_inputs(sources, TERMINALS)
+    spans = conductors.build(site, wiring.load_wiring(site), placed, manifests, georef, np.zeros((0, 3)), lines)
     model = conductor_outputs.sdf_model(spans, tmp_path / "scene", capsules=True)
     caps = list(model.iter("capsule"))
     assert len(caps) == sum(s.lods[s.lod].segments for s in spans)
@@ -283,8 +283,8 @@ def test_capsules_when_asked(tmp_path):
 
 def test_a_site_without_conductors_writes_an_empty_record(tmp_path):
     sources = mini_sources.make(tmp_path / "s")
-    site, placed, manifests, georef = _scene_inputs(sources, {"pole": [], "kiosk": []})
+    site, placed, manifests, georef, lines = _scene_inputs(sources, {"pole": [], "kiosk": []})
     w = wiring.load_wiring(site)
-    assert w.empty and conductors.build(site, w, placed, manifests, georef, np.zeros((0, 3))) == []
+    assert w.empty and conductors.build(site, w, placed, manifests, georef, np.zeros((0, 3)), lines) == []
     conductors.write_record(tmp_path / "c.json", [], w)
     assert json.loads((tmp_path / "c.json").read_text())["spans"] == []

@@ -128,6 +128,14 @@ def _chord_distance(a: float, xm: float, x0, x1):
     return _vertical_gap(a, xm, x0, x1) * cos
 
 
+def _span_gap(a: float, xm: float, L: float, h: float) -> float:
+    """_vertical_gap over the whole span [0, L], in scalar math (root searches call it
+    often: numpy's overhead on one value would dominate)."""
+    m = h / L
+    xs = xm + a * math.asinh(m)
+    return m * xs - 2.0 * a * math.sinh((xs - 2.0 * xm) / (2.0 * a)) * math.sinh(xs / (2.0 * a))
+
+
 def sag(c: Catenary) -> float:
     """Largest vertical chord-to-curve distance of the span, m (0 for a straight one)."""
     return 0.0 if c.straight else float(_vertical_gap(c.a, c.xm, 0.0, c.L))
@@ -149,13 +157,22 @@ def lowest_point(c: Catenary) -> np.ndarray:
     return _at(c, np.array([x]))[0]
 
 
+def _length_and_integral(a: float, xm: float, L: float) -> tuple[float, float]:
+    """Arc length and the integral of cosh(u) ds / 1 (times H: of the tension) of a
+    catenary of constant a between x = 0 and L, scalars."""
+    u0, u1 = -xm / a, (L - xm) / a
+    # sinh u1 - sinh u0 = 2 cosh((u0+u1)/2) sinh((u1-u0)/2): no cancellation
+    length = 2.0 * a * math.cosh((u0 + u1) / 2.0) * math.sinh((u1 - u0) / 2.0)
+    # a [u/2 + sinh(2u)/4] between u0 and u1, the sinh difference as a product
+    integral = a * ((u1 - u0) / 2.0 + 0.5 * math.cosh(u0 + u1) * math.sinh(u1 - u0))
+    return length, integral
+
+
 def arc_length(c: Catenary) -> float:
     """Length of conductor between the ends, m."""
     if c.straight:
         return math.hypot(c.L, c.h)
-    u0, u1 = -c.xm / c.a, (c.L - c.xm) / c.a
-    # sinh u1 - sinh u0 = 2 cosh((u0+u1)/2) sinh((u1-u0)/2): no cancellation
-    return float(2.0 * c.a * math.cosh((u0 + u1) / 2.0) * math.sinh((u1 - u0) / 2.0))
+    return _length_and_integral(c.a, c.xm, c.L)[0]
 
 
 def tension_integral(c: Catenary, H: float) -> float:
@@ -163,9 +180,7 @@ def tension_integral(c: Catenary, H: float) -> float:
     elongation is this over EA."""
     if c.straight:
         return H * math.hypot(c.L, c.h)
-    u0, u1 = -c.xm / c.a, (c.L - c.xm) / c.a
-    # a H [u/2 + sinh(2u)/4] between u0 and u1, the sinh difference as a product
-    return float(c.a * H * ((u1 - u0) / 2.0 + 0.5 * math.cosh(u0 + u1) * math.sinh(u1 - u0)))
+    return H * _length_and_integral(c.a, c.xm, c.L)[1]
 
 
 def from_sag(p0, p1, target: float) -> Catenary:
@@ -181,7 +196,7 @@ def from_sag(p0, p1, target: float) -> Catenary:
 
     def excess(log_a: float) -> float:
         a = math.exp(log_a)
-        return float(_vertical_gap(a, _lowest(L, h, a), 0.0, L)) - target
+        return _span_gap(a, _lowest(L, h, a), L, h) - target
 
     guess = math.log(L * chord / (8.0 * target))  # parabola: sag = L chord / 8a
     lo, hi = guess - 0.5, guess + 0.5
@@ -247,6 +262,58 @@ def segments_for(c: Catenary, tolerance: float, cap: int = 4096) -> int:
     return n
 
 
+def segments_for_many(curves: list[Catenary], tolerance: float, cap: int = 4096) -> tuple[np.ndarray, np.ndarray]:
+    """`segments_for` and the measured chord error of many curves at once: (k,) int
+    segment counts and (k,) float64 errors. Every candidate count of every curve is
+    measured in one vectorised pass over all their segments (a few passes in all)."""
+    k = len(curves)
+    n = np.ones(k, dtype=np.int64)
+    err = np.zeros(k)
+    live = np.array([not c.straight for c in curves], dtype=bool)
+    if not live.any():
+        return n, err
+    idx = np.nonzero(live)[0]
+    a = np.array([curves[i].a for i in idx])
+    xm = np.array([curves[i].xm for i in idx])
+    L = np.array([curves[i].L for i in idx])
+    guess = np.clip(np.ceil(L / np.sqrt(8.0 * a * tolerance)), 1, cap).astype(np.int64)
+
+    def measure(counts):
+        owner = np.repeat(np.arange(len(counts)), counts)
+        start = np.cumsum(counts) - counts
+        j = np.arange(int(counts.sum())) - np.repeat(start, counts)
+        dx = np.repeat(L / counts, counts)
+        x0, x1 = j * dx, (j + 1) * dx
+        d = _chord_distance_v(np.repeat(a, counts), np.repeat(xm, counts), x0, x1)
+        return np.maximum.reduceat(d, start) if len(d) else np.zeros(0), owner
+
+    e, _ = measure(guess)
+    # fewer while the one below still meets the tolerance, more while this one fails
+    for _ in range(64):
+        below = np.maximum(guess - 1, 1)
+        eb, _ = measure(below)
+        step_down = (guess > 1) & (eb <= tolerance)
+        step_up = (e > tolerance) & (guess < cap)
+        if not (step_down.any() or step_up.any()):
+            break
+        guess = np.where(step_down, below, np.where(step_up, guess + 1, guess))
+        e = np.where(step_down, eb, e)
+        if step_up.any():
+            e, _ = measure(guess)
+    n[idx], err[idx] = guess, e
+    return n, err
+
+
+def _chord_distance_v(a, xm, x0, x1):
+    """_chord_distance with a per-segment catenary constant and vertex, (m,) arrays."""
+    dx = x1 - x0
+    rise = 2.0 * a * np.sinh((x0 + x1 - 2.0 * xm) / (2.0 * a)) * np.sinh(dx / (2.0 * a))
+    m = rise / dx
+    xs = xm + a * np.arcsinh(m)
+    gap = m * (xs - x0) - 2.0 * a * np.sinh((x0 + xs - 2.0 * xm) / (2.0 * a)) * np.sinh((xs - x0) / (2.0 * a))
+    return gap * dx / np.hypot(dx, rise)
+
+
 def change_of_state(p0, p1, w: float, ea: float, alpha: float, h_ref: float, t_ref: float, t: float) -> float:
     """Horizontal tension (N) at conductor temperature `t` (deg C) of the span whose
     tension is `h_ref` N at `t_ref`: the conductor's unstressed length at a fixed
@@ -262,10 +329,13 @@ def change_of_state(p0, p1, w: float, ea: float, alpha: float, h_ref: float, t_r
     # lengths grow linearly from the tables' 20 deg C: the ratio makes t -> t' -> t exact
     target = unstressed * (1.0 + alpha * (t - T_BASE)) / (1.0 + alpha * (t_ref - T_BASE))
 
+    L, h = ref.L, ref.h
+
     def excess(log_h: float) -> float:
         H = math.exp(log_h)
-        c = from_tension(p0, p1, H, w)
-        return arc_length(c) - tension_integral(c, H) * elastic - target
+        a = H / w
+        length, integral = _length_and_integral(a, _lowest(L, h, a), L)
+        return length - H * integral * elastic - target
 
     lo, hi = math.log(h_ref) - 0.25, math.log(h_ref) + 0.25
     for _ in range(200):

@@ -85,7 +85,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     placed = placing.place(site, list(fp.placements), georef)
     eyes = placing.inspection_points_enu(site, georef)
     placed = placing.choose_lods(placed, manifests, eyes, site)
-    spans = conductors.build(site, wiring, placed, manifests, georef, eyes)
+    spans = conductors.build(site, wiring, placed, manifests, georef, eyes, fp.conductor_lines)
     origin = georef.origin_llh
     sun = scene_sun(site, origin)
     tname = config.terrain_model_name(site)

@@ -74,11 +74,12 @@ def terminal_points(placed: list[Placed], manifests: dict[str, dict]) -> dict[tu
     return out
 
 
-def snap_lines(lines: list[wsrc.LayerLine], wiring: wsrc.Wiring, georef, height: float,
+def snap_lines(lines, wiring: wsrc.Wiring, georef, height: float,
                terminals: dict[tuple[str, str], np.ndarray], plan: str) -> tuple[list[wsrc.SpanSpec], list[str]]:
     """Spans of the floor plan's conductor lines: each vertex snaps to the nearest
     terminal within the snap tolerance (horizontal distance in the scene frame); each
-    pair of consecutive vertices is a span with its layer's settings."""
+    pair of consecutive vertices is a span with its layer's settings. `lines`: the
+    floor plan's conductor_lines, (handle, layer, plan vertices)."""
     from scipy.spatial import cKDTree
 
     if not lines:
@@ -86,14 +87,14 @@ def snap_lines(lines: list[wsrc.LayerLine], wiring: wsrc.Wiring, georef, height:
     keys = sorted(terminals)
     tree = cKDTree(np.array([terminals[k][:2] for k in keys])) if keys else None
     tol = wiring.snap_tolerance_m
-    xy = np.array([v for ln in lines for v in ln.vertices], dtype=np.float64)
+    xy = np.array([v for _, _, vertices in lines for v in vertices], dtype=np.float64)
     enu = georef.to_enu(xy, np.full(len(xy), height))[:, :2]
     specs, problems, k = [], [], 0
-    for ln in lines:
-        lay = wiring.layers[ln.layer]
+    for handle, layer, vertices in lines:
+        lay = wiring.layers[layer]
         refs = []
-        for x, y in ln.vertices:
-            where = f"{plan}: {ln.layer} {'LINE' if len(ln.vertices) == 2 else 'LWPOLYLINE'} #{ln.handle} end ({x:.3f}, {y:.3f})"
+        for x, y in vertices:
+            where = f"{plan}: {layer} {'LINE' if len(vertices) == 2 else 'LWPOLYLINE'} #{handle} end ({x:.3f}, {y:.3f})"
             point = enu[k]
             k += 1
             found = tree.query_ball_point(point, tol) if tree is not None else []
@@ -109,19 +110,19 @@ def snap_lines(lines: list[wsrc.LayerLine], wiring: wsrc.Wiring, georef, height:
                 continue
             sid = wsrc.span_id(a, b)
             if a == b:
-                problems.append(f"conductor {sid} ({plan}: #{ln.handle} segment {i}): both ends snap to {'.'.join(a)}")
+                problems.append(f"conductor {sid} ({plan}: #{handle} segment {i}): both ends snap to {'.'.join(a)}")
                 continue
             specs.append(wsrc.SpanSpec(sid, a, b, lay["type"], float(lay.get("temperature_c", wiring.temperature_c)),
                                        lay.get("tension_n"), None, lay.get("sag_ratio"), lay.get("voltage_kv"),
-                                       f"{plan}: {ln.layer} #{ln.handle}"))
+                                       f"{plan}: {layer} #{handle}"))
     return specs, problems
 
 
-def solve_span(spec: wsrc.SpanSpec, ctype: wsrc.ConductorType, p0: np.ndarray, p1: np.ndarray,
-               temperature_c: float, budgets: tuple[float, ...]) -> Span:
-    """The span at `temperature_c`: from its tension or sag at its own reference
-    temperature, carried over by the change-of-state equation; a polyline per LOD
-    budget with the fewest segments whose chord error is within it."""
+def solve_curve(spec: wsrc.SpanSpec, ctype: wsrc.ConductorType, p0: np.ndarray, p1: np.ndarray,
+                temperature_c: float) -> tuple[cat.Catenary, float]:
+    """The span's curve and horizontal tension at `temperature_c`: from its tension
+    or sag at its own reference temperature, carried over by the change-of-state
+    equation."""
     w = ctype.w
     if spec.tension_n is not None:
         h_ref = float(spec.tension_n)
@@ -130,12 +131,26 @@ def solve_span(spec: wsrc.SpanSpec, ctype: wsrc.ConductorType, p0: np.ndarray, p
         h_ref = cat.from_sag(p0, p1, sag).a * w
     tension = h_ref if temperature_c == spec.temperature_c else cat.change_of_state(
         p0, p1, w, ctype.ea, ctype.alpha_per_k, h_ref, spec.temperature_c, temperature_c)
-    curve = cat.from_tension(p0, p1, tension, w)
-    lods = []
-    for budget in budgets:
-        n = cat.segments_for(curve, budget)
-        lods.append(SpanLod(budget, cat.points(curve, n), cat.chord_error(curve, n)))
-    return Span(spec, ctype, curve, tension, temperature_c, tuple(lods))
+    return cat.from_tension(p0, p1, tension, w), tension
+
+
+def with_lods(solved: list[tuple[wsrc.SpanSpec, wsrc.ConductorType, cat.Catenary, float]], temperature_c: float,
+              budgets: tuple[float, ...]) -> list[Span]:
+    """Spans of solved curves (spec, type, curve, tension), with a polyline per LOD
+    budget: the fewest segments whose measured chord error is within it (all spans'
+    counts measured together)."""
+    curves = [c for _, _, c, _ in solved]
+    levels = [cat.segments_for_many(curves, b) for b in budgets]
+    return [Span(spec, ctype, c, tension, temperature_c,
+                 tuple(SpanLod(b, cat.points(c, int(n[i])), float(e[i])) for b, (n, e) in zip(budgets, levels)))
+            for i, (spec, ctype, c, tension) in enumerate(solved)]
+
+
+def solve_span(spec: wsrc.SpanSpec, ctype: wsrc.ConductorType, p0: np.ndarray, p1: np.ndarray,
+               temperature_c: float, budgets: tuple[float, ...]) -> Span:
+    """One span at `temperature_c` with its LOD polylines (solve_curve, with_lods)."""
+    curve, tension = solve_curve(spec, ctype, p0, p1, temperature_c)
+    return with_lods([(spec, ctype, curve, tension)], temperature_c, budgets)[0]
 
 
 def choose_lod(spans: list[Span], eyes: np.ndarray, site) -> list[Span]:
@@ -189,18 +204,17 @@ def touching(spans: list[Span]) -> list[str]:
 
 
 def build(site, wiring: wsrc.Wiring, placed: list[Placed], manifests: dict[str, dict], georef,
-          eyes: np.ndarray) -> list[Span]:
+          eyes: np.ndarray, lines=()) -> list[Span]:
     """Every span of the site, solved, LOD chosen, checked; UserError listing every
-    problem. A site without conductors gives []."""
+    problem. `lines`: the floor plan's conductor_lines. A site without conductors gives []."""
     if wiring.empty:
         return []
     terminals = terminal_points(placed, manifests)
     plan = site.floorplan
-    lines = wsrc.read_layer_lines(site.root / plan, set(wiring.layers), site.floorplan_options)
     height = georef.origin_llh[2]
     from_plan, problems = snap_lines(lines, wiring, georef, height, terminals, plan)
     by_tag = {pl.placement.tag: pl.placement.asset_id for pl in placed}
-    spans, seen = [], {}
+    solved, seen = [], {}
     for spec in (*wiring.specs, *from_plan):
         where = f"conductor {spec.id} ({spec.origin})"
         if spec.id in seen:
@@ -220,10 +234,11 @@ def build(site, wiring: wsrc.Wiring, placed: list[Placed], manifests: dict[str, 
         if len(ends) < 2:
             continue
         try:
-            spans.append(solve_span(spec, wiring.types[spec.type], ends[0], ends[1], wiring.temperature_c,
-                                    wiring.lod_chord_errors_m))
+            ctype = wiring.types[spec.type]
+            solved.append((spec, ctype, *solve_curve(spec, ctype, ends[0], ends[1], wiring.temperature_c)))
         except cat.CatenaryError as e:
             problems.append(f"{where}: {e}")
+    spans = with_lods(solved, wiring.temperature_c, wiring.lod_chord_errors_m)
     problems += touching(spans)
     if problems:
         raise UserError(site.path, "conductors", wsrc._listing(problems))
