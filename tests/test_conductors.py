@@ -288,3 +288,18 @@ def test_a_site_without_conductors_writes_an_empty_record(tmp_path):
     assert w.empty and conductors.build(site, w, placed, manifests, georef, np.zeros((0, 3)), lines) == []
     conductors.write_record(tmp_path / "c.json", [], w)
     assert json.loads((tmp_path / "c.json").read_text())["spans"] == []
+
+
+def test_bench_section_on_the_small_site(tmp_path):
+    from pipeline.bench.conductors import conductor_section
+    from pipeline.bench.context import Context
+
+    sources = make_sources(tmp_path / "s")
+    data = conductor_section(Context(sources=sources, out=tmp_path / "out", work=tmp_path, quick=True))
+    assert data["sample_spans"] == 3 and data["spans"] == 3 * data["copies_of_sample"]
+    assert data["placements"] >= 1000 and data["seconds"]["touching"] == 0  # copies 300 m apart never touch
+    for kind in ("longest", "slackest", "dropper"):
+        rows = [r for r in data["chord_vs_segments"] if r["span"] == kind]
+        errors = [r["chord_error_m"] for r in rows]
+        # uniform spacing: the error falls as 1 / n^2 (a quarter per doubling)
+        assert all(0.2 < b / a < 0.3 for a, b in zip(errors[2:], errors[3:])), (kind, errors)

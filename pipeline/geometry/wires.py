@@ -79,3 +79,37 @@ def segment_distances(p0: np.ndarray, p1: np.ndarray, q0: np.ndarray, q1: np.nda
     s = np.where(t > 1, np.where(a > tiny, np.clip((b - c) / np.where(a > tiny, a, 1), 0, 1), 0.0), s)
     t = np.clip(t, 0, 1)
     return np.linalg.norm((p0 + s[:, None] * d1) - (q0 + t[:, None] * d2), axis=1)
+
+
+def close_pairs(polylines: list[np.ndarray], reach: float) -> dict[tuple[int, int], float]:
+    """Pairs of polylines (each (n_i, 3), n_i >= 2) that come within `reach` of each
+    other: (i, j) with i < j -> their shortest distance. Segments are paired through a
+    k-d tree of their midpoints (a pair further apart than reach plus both half
+    lengths cannot meet), then measured exactly, all at once."""
+    from scipy.spatial import cKDTree
+
+    if len(polylines) < 2:
+        return {}
+    a = np.concatenate([p[:-1] for p in polylines])
+    b = np.concatenate([p[1:] for p in polylines])
+    owner = np.repeat(np.arange(len(polylines)), [len(p) - 1 for p in polylines])
+    mid = (a + b) / 2.0
+    half = np.linalg.norm(b - a, axis=1) / 2.0
+    pairs = cKDTree(mid).query_pairs(reach + 2.0 * float(half.max()), output_type="ndarray")
+    if len(pairs) == 0:
+        return {}
+    pairs = pairs[owner[pairs[:, 0]] != owner[pairs[:, 1]]]
+    gap = np.linalg.norm(mid[pairs[:, 0]] - mid[pairs[:, 1]], axis=1) - half[pairs[:, 0]] - half[pairs[:, 1]]
+    pairs = pairs[gap <= reach]
+    if len(pairs) == 0:
+        return {}
+    d = segment_distances(a[pairs[:, 0]], b[pairs[:, 0]], a[pairs[:, 1]], b[pairs[:, 1]])
+    i, j = owner[pairs[:, 0]], owner[pairs[:, 1]]
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    keep = d <= reach
+    i, j, d = i[keep], j[keep], d[keep]
+    order = np.lexsort((d, j, i))
+    i, j, d = i[order], j[order], d[order]
+    first = np.ones(len(i), dtype=bool)
+    first[1:] = (i[1:] != i[:-1]) | (j[1:] != j[:-1])
+    return {(int(x), int(y)): float(z) for x, y, z in zip(i[first], j[first], d[first])}

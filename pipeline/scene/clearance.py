@@ -24,7 +24,7 @@ from .. import config
 from ..errors import UserError
 from ..findings import Finding, finding
 from ..geometry import catenary as cat
-from ..geometry.wires import segment_distances
+from ..geometry.wires import close_pairs
 from .conductors import Span
 
 GROUND_SAMPLES = 64  # points per span where the ground under it is looked up
@@ -93,12 +93,15 @@ def check(spans: list[Span], table: dict[float, Level], ground) -> tuple[list[Fi
     levels = [table.get(float(s.spec.voltage_kv)) if s.spec.voltage_kv else None for s in spans]
     checked = [i for i, lv in enumerate(levels) if lv is not None]
     curves = {i: hot(spans[i]) for i in checked}
-    points = {i: cat.points(curves[i], max(spans[i].lods[0].segments, GROUND_SAMPLES)) for i in checked}
+    points = {i: cat.points(curves[i], spans[i].lods[0].segments) for i in checked}
+    dense = {i: cat.points(curves[i], max(spans[i].lods[0].segments, GROUND_SAMPLES)) for i in checked}
+    heights = ground(np.concatenate([dense[i][:, :2] for i in checked])) if checked else np.zeros(0)
+    at = np.cumsum([0] + [len(dense[i]) for i in checked])
     out: list[Finding] = []
-    for i in checked:
+    for k_, i in enumerate(checked):
         s, lv, c = spans[i], levels[i], curves[i]
-        pts = points[i]
-        z = ground(pts[:, :2])
+        pts = dense[i]
+        z = heights[at[k_]:at[k_ + 1]]
         above = pts[:, 2] - z
         k = int(np.nanargmin(above)) if np.isfinite(above).any() else -1
         if k >= 0 and above[k] < lv.ground_m:
@@ -116,28 +119,16 @@ def check(spans: list[Span], table: dict[float, Level], ground) -> tuple[list[Fi
 
 def _phase_to_phase(spans, levels, checked, points) -> list[Finding]:
     node = dict(zip(checked, nodes([spans[i] for i in checked])))
-    clear = {i: levels[i].phase_to_phase_m + spans[i].radius for i in checked}
-    lo = {i: points[i].min(axis=0) for i in checked}
-    hi = {i: points[i].max(axis=0) for i in checked}
-    order = sorted(checked, key=lambda i: lo[i][0])
-    reach = max(clear.values(), default=0.0)
+    reach = max(levels[i].phase_to_phase_m + 2.0 * spans[i].radius for i in checked) if checked else 0.0
     out = []
-    for pos, i in enumerate(order):
-        for j in order[pos + 1:]:
-            if lo[j][0] > hi[i][0] + reach:
-                break
-            if node[i] == node[j]:
-                continue
-            need = max(levels[i].phase_to_phase_m, levels[j].phase_to_phase_m) + spans[i].radius + spans[j].radius
-            if np.any(lo[j] > hi[i] + need) or np.any(lo[i] > hi[j] + need):
-                continue
-            pa, pb = points[i], points[j]
-            ia, ib = np.meshgrid(np.arange(len(pa) - 1), np.arange(len(pb) - 1), indexing="ij")
-            ia, ib = ia.reshape(-1), ib.reshape(-1)
-            d = float(segment_distances(pa[ia], pa[ia + 1], pb[ib], pb[ib + 1]).min())
-            if d < need:
-                a, b = sorted([spans[i].id, spans[j].id])
-                out.append(finding("WIRE002", f"conductor {a}",
-                                   f"{d:.3f} m from conductor {b} (another node) at maximum temperature, under the "
-                                   f"{need:.3f} m phase-to-phase clearance (with the bundle radii)"))
+    for (p, q), d in sorted(close_pairs([points[i] for i in checked], reach).items()):
+        i, j = checked[p], checked[q]
+        if node[i] == node[j]:
+            continue
+        need = max(levels[i].phase_to_phase_m, levels[j].phase_to_phase_m) + spans[i].radius + spans[j].radius
+        if d < need:
+            a, b = sorted([spans[i].id, spans[j].id])
+            out.append(finding("WIRE002", f"conductor {a}",
+                               f"{d:.3f} m from conductor {b} (another node) at maximum temperature, under the "
+                               f"{need:.3f} m phase-to-phase clearance (with the bundle radii)"))
     return out

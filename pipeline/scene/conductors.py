@@ -18,7 +18,7 @@ import numpy as np
 from .. import wiring as wsrc
 from ..errors import UserError
 from ..geometry import catenary as cat
-from ..geometry.wires import bundle_paths, segment_distances
+from ..geometry.wires import bundle_paths, close_pairs
 from .placements import Placed, screen_error_px
 
 TOUCH_MARGIN_M = 0.0  # spans closer than the sum of their bundle radii (plus this) touch
@@ -175,32 +175,19 @@ def choose_lod(spans: list[Span], eyes: np.ndarray, site) -> list[Span]:
 
 def touching(spans: list[Span]) -> list[str]:
     """Pairs of spans (not sharing a terminal) closer than the sum of their bundle
-    radii: candidates by overlapping padded boxes, then every segment pair of their
-    finest polylines measured exactly."""
+    radii, measured segment to segment on their finest polylines."""
     if len(spans) < 2:
         return []
-    lo = np.array([s.lods[0].points.min(axis=0) - s.radius for s in spans])
-    hi = np.array([s.lods[0].points.max(axis=0) + s.radius for s in spans])
-    order = np.argsort(lo[:, 0], kind="stable")
+    reach = 2.0 * max(s.radius for s in spans) + TOUCH_MARGIN_M
     problems = []
-    for pos, i in enumerate(order):
-        for j in order[pos + 1:]:
-            if lo[j, 0] > hi[i, 0]:
-                break
-            if np.any(lo[j] > hi[i]) or np.any(lo[i] > hi[j]):
-                continue
-            a, b = spans[i], spans[j]
-            if {a.spec.start, a.spec.end} & {b.spec.start, b.spec.end}:
-                continue
-            pa, pb = a.lods[0].points, b.lods[0].points
-            ia, ib = np.meshgrid(np.arange(len(pa) - 1), np.arange(len(pb) - 1), indexing="ij")
-            ia, ib = ia.reshape(-1), ib.reshape(-1)
-            d = float(segment_distances(pa[ia], pa[ia + 1], pb[ib], pb[ib + 1]).min())
-            if d < a.radius + b.radius + TOUCH_MARGIN_M:
-                first, second = sorted([a.id, b.id])
-                problems.append(f"conductor {first}: crosses conductor {second} ({d:.3f} m apart, "
-                                f"bundle radii {a.radius:.3f} + {b.radius:.3f} m)")
-    return problems
+    for (i, j), d in sorted(close_pairs([s.lods[0].points for s in spans], reach).items()):
+        a, b = spans[i], spans[j]
+        if {a.spec.start, a.spec.end} & {b.spec.start, b.spec.end} or d >= a.radius + b.radius + TOUCH_MARGIN_M:
+            continue
+        first, second = sorted([a.id, b.id])
+        problems.append(f"conductor {first}: crosses conductor {second} ({d:.3f} m apart, "
+                        f"bundle radii {a.radius:.3f} + {b.radius:.3f} m)")
+    return sorted(problems)
 
 
 def build(site, wiring: wsrc.Wiring, placed: list[Placed], manifests: dict[str, dict], georef,
