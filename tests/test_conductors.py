@@ -303,3 +303,89 @@ def test_bench_section_on_the_small_site(tmp_path):
         errors = [r["chord_error_m"] for r in rows]
         # uniform spacing: the error falls as 1 / n^2 (a quarter per doubling)
         assert all(0.2 < b / a < 0.3 for a, b in zip(errors[2:], errors[3:])), (kind, errors)
+
+
+# --- runtime: the conductor temperature as an input, sag following ------------------------
+
+SCENARIO = """
+[scenario]
+name = "heat"
+seed = 1
+duration_s = 4.0
+step_s = 1.0
+start = "2025-03-20T12:00:00-03:00"
+assets = []
+
+[[nodes]]
+id = "clock"
+type = "clock"
+period_s = 1.0
+
+[[nodes]]
+id = "load"
+type = "linear"
+params = { gain = 400.0, offset = 200.0, unit_in = "s", unit_out = "A" }
+
+[[nodes]]
+id = "wire"
+type = "conductor_thermal"
+params = { diameter_m = 0.03, r25_ohm_per_km = 0.0728, r75_ohm_per_km = 0.0869, ambient_c = 30.0, irradiance_w_m2 = 900.0 }
+
+[[nodes]]
+id = "render"
+type = "render"
+
+[[edges]]
+from = "clock.t"
+to = "load.x"
+type = "float"
+unit = "s"
+
+[[edges]]
+from = "load.y"
+to = "wire.current"
+type = "float"
+unit = "A"
+
+[[edges]]
+from = "wire.temperature"
+to = "render.conductors.temperature"
+type = "float"
+unit = "degC"
+"""
+
+
+def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
+    from pxr import Usd, UsdGeom
+
+    from pipeline.runtime import thermal
+    from pipeline.runtime.run import run_scenario
+
+    _, out = built
+    scenario = tmp_path / "heat.toml"
+    scenario.write_text(SCENARIO)
+    summary = run_scenario(scenario, out, tmp_path / "run", formats=("usd",))
+    wires = summary["appliers"]["conductors_usd"]
+    assert wires["spans"] == 3 and wires["samples"] == 5
+    states = [json.loads(line) for line in (tmp_path / "run" / "states.jsonl").read_text().splitlines()]
+    temps = [s["outputs"]["wire.temperature"] for s in states]
+    assert temps == sorted(temps) and temps[0] > 30.0  # more current, hotter
+    assert temps[-1] == pytest.approx(thermal.temperature(
+        1800.0, 30.0, diameter_m=0.03, r25_ohm_per_km=0.0728, r75_ohm_per_km=0.0869, irradiance_w_m2=900.0))
+    record = {s["id"]: s for s in json.loads((out / "scene" / "conductors.json").read_text())["spans"]}
+    span = record["P-1.top~K-1.pad_a"]
+    stage = Usd.Stage.Open(str(tmp_path / "run" / "conductors.usda"))
+    curve = UsdGeom.BasisCurves(stage.GetPrimAtPath(span["usd_path"]))
+    p0 = np.array(span["from"]["enu"])
+    lowest = []
+    for k, temp in enumerate(temps):
+        pts = np.array(curve.GetPointsAttr().Get(k), dtype=np.float64) + p0
+        assert len(pts) == span["lods"][span["lod"]]["segments"] + 1
+        # each step's curve is the change-of-state catenary at that step's temperature
+        from pipeline.geometry import catenary as cat
+        H = cat.change_of_state(p0, span["to"]["enu"], span["weight_n_per_m"], 3.2e7, 2.0e-5, span["tension_n"],
+                                span["temperature_c"], temp)
+        truth = cat.points(cat.from_tension(p0, span["to"]["enu"], H, span["weight_n_per_m"]), len(pts) - 1)
+        assert np.max(np.linalg.norm(pts - truth, axis=1)) < 1e-4
+        lowest.append(pts[len(pts) // 2, 2])
+    assert all(b < a for a, b in zip(lowest, lowest[1:]))  # hotter, lower at mid-span

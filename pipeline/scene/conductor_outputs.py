@@ -21,26 +21,12 @@ from .. import glb, ir
 from ..export.names import fmt, safe_name
 from ..geometry.transform import matrix_to_xyz_rpy
 from ..geometry.wires import tube
-from .conductors import Span
+from .conductors import Span, prim_names
 
 TUBE_SIDES = 6  # a 30 mm wire: the hexagon's flats are 2 mm inside the circle
 MATERIAL = ir.Material("conductor_aluminium", base_color=(0.62, 0.63, 0.64, 1.0), metallic=0.9, roughness=0.45)
 FOLDER = "conductors"  # beside the world file
 MODEL = "conductors"
-
-
-def prim_names(spans: list[Span]) -> dict[str, str]:
-    """span id -> a USD/SDF-safe name, unique (a suffix where two ids spell alike)."""
-    out, used = {}, set()
-    for s in spans:
-        name = base = safe_name(s.id)
-        k = 1
-        while name in used:
-            k += 1
-            name = f"{base}_{k}"
-        used.add(name)
-        out[s.id] = name
-    return out
 
 
 def span_mesh(span: Span, lod: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

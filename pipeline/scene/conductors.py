@@ -19,6 +19,7 @@ from .. import wiring as wsrc
 from ..errors import UserError
 from ..geometry import catenary as cat
 from ..geometry.wires import bundle_paths, close_pairs
+from ..export.names import SCENE_ROOT, safe_name
 from .placements import Placed, screen_error_px
 
 TOUCH_MARGIN_M = 0.0  # spans closer than the sum of their bundle radii (plus this) touch
@@ -232,6 +233,20 @@ def build(site, wiring: wsrc.Wiring, placed: list[Placed], manifests: dict[str, 
     return choose_lod(sorted(spans, key=lambda s: s.id), eyes, site)
 
 
+def prim_names(spans: list[Span]) -> dict[str, str]:
+    """span id -> a USD/SDF-safe name, unique (a suffix where two ids spell alike)."""
+    out, used = {}, set()
+    for s in spans:
+        name = base = safe_name(s.id)
+        k = 1
+        while name in used:
+            k += 1
+            name = f"{base}_{k}"
+        used.add(name)
+        out[s.id] = name
+    return out
+
+
 def _r(values, digits: int = 6) -> list[float]:
     return [round(float(v), digits) for v in values]
 
@@ -241,16 +256,18 @@ def record(spans: list[Span], wiring: wsrc.Wiring) -> dict:
     LOD chosen and every LOD's points with its measured chord error; lengths to the
     micrometre, tensions to the millinewton."""
     types = sorted({s.ctype.name for s in spans})
+    names = prim_names(spans)
     return {
         "frame": "ENU metres at the scene origin (placements.json origin)",
         "temperature_c": wiring.temperature_c,
         "lod_chord_errors_m": list(wiring.lod_chord_errors_m),
         "types": {n: {"diameter_m": t.diameter_m, "mass_kg_per_m": t.mass_kg_per_m, "ea_n": t.ea_n,
                       "alpha_per_k": t.alpha_per_k, "bundle_count": t.bundle_count,
-                      "bundle_spacing_m": t.bundle_spacing_m, "max_temperature_c": t.max_temperature_c}
+                      "bundle_spacing_m": t.bundle_spacing_m, "max_temperature_c": t.max_temperature_c,
+                      "bundle_offsets_m": [_r(o) for o in t.bundle_offsets()]}
                   for n, t in ((n, wiring.types[n]) for n in types)},
         "spans": [{
-            "id": s.id, "type": s.ctype.name, "source": s.spec.origin,
+            "id": s.id, "type": s.ctype.name, "source": s.spec.origin, "usd_path": f"{SCENE_ROOT}/Conductors/{names[s.id]}",
             "from": {"terminal": ".".join(s.spec.start), "enu": _r(s.curve.p0)},
             "to": {"terminal": ".".join(s.spec.end), "enu": _r(s.curve.p1)},
             **({"voltage_kv": s.spec.voltage_kv} if s.spec.voltage_kv else {}),
