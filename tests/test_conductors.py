@@ -389,3 +389,5 @@ def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
         assert np.max(np.linalg.norm(pts - truth, axis=1)) < 1e-4
         lowest.append(pts[len(pts) // 2, 2])
     assert all(b < a for a, b in zip(lowest, lowest[1:]))  # hotter, lower at mid-span
+    r = external.usd_validation(tmp_path / "run" / "conductors.usda")
+    assert r.status == "passed", r.messages

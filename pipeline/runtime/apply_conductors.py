@@ -44,6 +44,10 @@ def write(conductors_json: Path, scene_usda: Path, out_path: Path, times: list[f
     spans, types = record["spans"], record["types"]
     layer = Sdf.Layer.CreateAnonymous(".usda")
     layer.subLayerPaths.append(os.path.relpath(scene_usda, Path(out_path).parent))
+    # a root layer states its own stage metadata (the sublayer's is not read from it)
+    layer.pseudoRoot.SetInfo("metersPerUnit", 1.0)
+    layer.pseudoRoot.SetInfo("upAxis", "Z")
+    layer.defaultPrim = "Site"
     layer.timeCodesPerSecond = 1.0 / step_s
     layer.startTimeCode, layer.endTimeCode = 0, max(len(times) - 1, 0)
     T = Sdf.ValueTypeNames
