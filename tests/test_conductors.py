@@ -391,3 +391,19 @@ def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
     assert all(b < a for a, b in zip(lowest, lowest[1:]))  # hotter, lower at mid-span
     r = external.usd_validation(tmp_path / "run" / "conductors.usda")
     assert r.status == "passed", r.messages
+
+
+def test_the_tileset_carries_the_conductors(built):
+    from pipeline import glb
+
+    _, out = built
+    tileset = json.loads((out / "tiles" / "tileset.json").read_text())
+    [wires] = [c for c in tileset["root"]["children"] if c.get("content", {}).get("uri") == "conductors.glb"]
+    centre, half = np.array(wires["boundingVolume"]["box"][:3]), np.array(wires["boundingVolume"]["box"][3:]).reshape(3, 3)
+    record = json.loads((out / "scene" / "conductors.json").read_text())
+    pts = np.array([p for s in record["spans"] for p in s["lods"][s["lod"]]["points"]])
+    assert np.all(np.abs(pts - centre) <= np.abs(half).sum(axis=0) + 1e-6)  # inside the axis-aligned box
+    doc, binary = glb.read(out / "tiles" / "conductors.glb")
+    assert sorted(m["name"] for m in doc["meshes"]) == ["ACSR_T", "TWIN"]
+    [r] = external.gltf_validator([out / "tiles" / "conductors.glb"])
+    assert r.status == "passed", r.messages
