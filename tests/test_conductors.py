@@ -407,3 +407,13 @@ def test_the_tileset_carries_the_conductors(built):
     assert sorted(m["name"] for m in doc["meshes"]) == ["ACSR_T", "TWIN"]
     [r] = external.gltf_validator([out / "tiles" / "conductors.glb"])
     assert r.status == "passed", r.messages
+
+
+def test_twin_info_counts_the_conductors_and_names_a_missing_terminal(tmp_path):
+    from pipeline.info import gather
+
+    bad = WIRING + '\n[[conductors]]\nfrom = "P-1.top"\nto = "K-4.nope"\ntype = "ACSR_T"\ntension_n = 300.0\n'
+    r = gather(make_sources(tmp_path / "s", bad), tmp_path / "nobuild")
+    assert r.conductors == {"spans in site.toml": 3, "lines in the floor plan": 1, "conductor types": 2}
+    assert [p for p in r.problems if "conductor" in p] == [
+        f"{tmp_path / 's' / 'site.toml'}: conductors: conductor P-1.top~K-4.nope: K-4 (kiosk) has no terminal 'nope'"]
