@@ -364,7 +364,7 @@ def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
     _, out = built
     scenario = tmp_path / "heat.toml"
     scenario.write_text(SCENARIO)
-    summary = run_scenario(scenario, out, tmp_path / "run", formats=("usd",))
+    summary = run_scenario(scenario, out, tmp_path / "run", formats=("usd", "gltf"))
     wires = summary["appliers"]["conductors_usd"]
     assert wires["spans"] == 3 and wires["samples"] == 5
     states = [json.loads(line) for line in (tmp_path / "run" / "states.jsonl").read_text().splitlines()]
@@ -390,6 +390,24 @@ def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
         lowest.append(pts[len(pts) // 2, 2])
     assert all(b < a for a, b in zip(lowest, lowest[1:]))  # hotter, lower at mid-span
     r = external.usd_validation(tmp_path / "run" / "conductors.usda")
+    assert r.status == "passed", r.messages
+
+    # glTF: a morph target per further temperature, picked step by step
+    from pipeline import glb
+
+    assert summary["appliers"]["conductors_gltf"]["shapes"] == 5
+    doc, binary = glb.read(tmp_path / "run" / "gltf" / "conductors.glb")
+    [node] = [i for i, n in enumerate(doc["nodes"]) if n["name"] == "P-1.top~K-1.pad_a"]
+    prim = doc["meshes"][doc["nodes"][node]["mesh"]]["primitives"][0]
+    base = glb.accessor(doc, binary, prim["attributes"]["POSITION"]).astype(np.float64)
+    hottest = base + glb.accessor(doc, binary, prim["targets"][-1]["POSITION"])
+    rings = glb.points_to_z_up(hottest).reshape(-1, 6, 3).mean(axis=1) + p0  # a hexagon's centre is its axis
+    assert np.max(np.linalg.norm(rings - truth, axis=1)) < 1e-4  # truth: the last step's catenary
+    [anim] = doc["animations"]
+    [channel] = [c for c in anim["channels"] if c["target"]["node"] == node]
+    weights = glb.accessor(doc, binary, anim["samplers"][channel["sampler"]]["output"]).reshape(5, 4)
+    assert weights.tolist() == [[0, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+    [r] = external.gltf_validator([tmp_path / "run" / "gltf" / "conductors.glb"])
     assert r.status == "passed", r.messages
 
 

@@ -154,6 +154,12 @@ def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = No
         from . import apply_gltf
 
         summary["appliers"]["gltf"] = apply_gltf.write(data, out / "gltf")
+        wires = build_dir / "scene" / "conductors.json"
+        if data.conductor_temperature is not None and wires.is_file():
+            from . import apply_conductors
+
+            summary["appliers"]["conductors_gltf"] = apply_conductors.write_gltf(
+                wires, out / "gltf" / "conductors.glb", data.times, data.conductor_temperature)
     if "sdf" in formats:
         from . import apply_sdf
 
