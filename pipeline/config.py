@@ -174,6 +174,7 @@ class FloorplanOptions:
     units: str | None = None
     grid_scale: float = 1.0
     max_placements: int = 100_000  # more from the drawing's INSERTs is refused before expanding them
+    conductor_layers: tuple[str, ...] = ()  # upper case: their LINEs are conductors ([wiring] layers), not ignored
 
 
 @dataclass(frozen=True)
@@ -337,6 +338,7 @@ def _floorplan_options(data: dict, path: Path) -> FloorplanOptions:
         units=data["plan"].get("units"),
         grid_scale=float(data["plan"]["grid_scale"]),
         max_placements=int(fp["max_placements"]),
+        conductor_layers=tuple(sorted({lay["layer"].upper() for lay in data.get("wiring", {}).get("layers", [])})),
     )
 
 
@@ -376,6 +378,7 @@ class AssetConfig:
     bindings: tuple[dict, ...]
     scale: float = 1.0
     tessellation_max_triangles: int = 1_000_000
+    terminals: tuple[tuple[str, tuple[float, float, float]], ...] = ()  # conductor attachment points, model frame
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -407,6 +410,11 @@ def load_asset_config(path: Path, passed: PassedChecks | None = None) -> AssetCo
     budgets = tuple(float(b) for b in data.get("lod", {}).get("budgets_m", [0.005, 0.02, 0.08]))
     if list(budgets) != sorted(budgets):
         raise UserError(path, "lod.budgets_m", "budgets must ascend (LOD1 finest)")
+    terminals = tuple((t["name"], tuple(float(v) for v in t["position"])) for t in data.get("terminals", []))
+    names = [n for n, _ in terminals]
+    for i, n in enumerate(names):
+        if names.index(n) != i:
+            raise UserError(path, f"terminals[{i}].name", f"duplicate terminal {n!r}")
     source = path.parent / data["source"]
     if not source.is_file():
         raise UserError(path, "source", f"source file {data['source']!r} not found in {path.parent}")
@@ -426,6 +434,7 @@ def load_asset_config(path: Path, passed: PassedChecks | None = None) -> AssetCo
         lod_budgets_m=budgets,
         collision_mode=data.get("collision", {}).get("mode", "hull_per_link"),
         bindings=tuple(data.get("bindings", [])),
+        terminals=terminals,
         raw=data,
     )
 

@@ -60,6 +60,10 @@ RULES: dict[str, tuple[str, str, str]] = {
                                          "ground: PLACE005 still checks that it stands on the terrain)"),
     "PLACE004": ("warning", "placement", "footprints overlap beyond tolerance"),
     "PLACE005": ("error", "placement", "base not on the terrain (over 1 cm)"),
+    "WIRE001": ("warning", "conductor", "conductor nearer the ground than its voltage level's clearance at maximum temperature"),
+    "WIRE002": ("warning", "conductor", "conductors of different electrical nodes nearer than the phase-to-phase clearance "
+                                        "at maximum temperature"),
+    "WIRE003": ("warning", "conductor", "conductor sag beyond the clearance table's limit at maximum temperature"),
     "PKG001": ("error", "package", "XML file not well-formed"),
     "PKG002": ("error", "package", "a referenced file (mesh URI, manifest output, model.sdf) is missing"),
     "PKG003": ("error", "package", "a URI or path that leaves its package"),

@@ -26,6 +26,7 @@ class InfoReport:
     ignored: list[tuple[str, int]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+    conductors: dict[str, int] = field(default_factory=dict)  # spans in site.toml, lines in the plan, types
 
 
 def _triangles(cfg: config.AssetConfig, build: Path) -> int | None:
@@ -101,7 +102,32 @@ def gather(sources: Path, build: Path = Path("build"), progress=None) -> InfoRep
     used = set(r.per_asset) | scenario_assets(sources)
     r.unused = sorted(set(assets) - used)
     r.ignored = list(fp.ignored)
+    _conductors(r, site, fp, assets)
     return r
+
+
+def _conductors(r: InfoReport, site, fp, assets: dict) -> None:
+    """The conductors' sources: counts, and every [[conductors]] end whose tag or
+    terminal does not exist (the plan's lines are snapped when the scene is built)."""
+    from .wiring import load_wiring
+
+    try:
+        w = load_wiring(site)
+    except UserError as e:
+        r.problems.append(str(e))
+        return
+    if w.empty:
+        return
+    r.conductors = {"spans in site.toml": len(w.specs), "lines in the floor plan": len(fp.conductor_lines),
+                    "conductor types": len(w.types)}
+    asset_of = {p.tag: p.asset_id for p in fp.placements}
+    for spec in w.specs:
+        for tag, name in (spec.start, spec.end):
+            if tag not in asset_of:
+                r.problems.append(f"{site.path}: conductors: conductor {spec.id}: no placement is tagged {tag!r}")
+            elif asset_of[tag] in assets and name not in {n for n, _ in assets[asset_of[tag]].terminals}:
+                r.problems.append(f"{site.path}: conductors: conductor {spec.id}: {tag} ({asset_of[tag]}) has no "
+                                  f"terminal {name!r}")
 
 
 def render(r: InfoReport, console: Console | None = None, errors: Console | None = None) -> None:
@@ -121,6 +147,8 @@ def render(r: InfoReport, console: Console | None = None, errors: Console | None
             levels.add_row(level, str(n))
         levels.add_row("[bold]all", str(sum(r.per_level.values())))
         console.print(levels)
+    if r.conductors:
+        console.print("conductors: " + ", ".join(f"{k} {n}" for k, n in r.conductors.items()))
     if r.unused:
         console.print(f"assets no placement or scenario uses: {', '.join(r.unused)}")
     if r.ignored:

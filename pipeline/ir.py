@@ -482,3 +482,6 @@ class FloorPlan:
     ignored: tuple[tuple[str, int], ...] = ()
     inserts: tuple[tuple[str, int], ...] = ()
     warnings: tuple[str, ...] = ()
+    # LINEs and LWPOLYLINEs of the conductor layers: (handle, layer upper case,
+    # plan vertices in metres ((x, y), ...)), in drawing order
+    conductor_lines: tuple[tuple[str, str, tuple[tuple[float, float], ...]], ...] = ()

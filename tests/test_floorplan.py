@@ -217,7 +217,9 @@ def site():
 
 @pytest.fixture(scope="module")
 def sample(site):
-    return read_floorplan(SAMPLE_DXF, known_assets=asset_ids(), levels=set(site.level_names))
+    # as the build reads it: the site's options name the conductor layers, not ignored
+    return read_floorplan(SAMPLE_DXF, known_assets=asset_ids(), levels=set(site.level_names),
+                          options=site.floorplan_options)
 
 
 def test_sample_counts(sample):

@@ -103,7 +103,7 @@ def test_junit_has_one_case_per_rule_per_target_and_fails_on_errors(built):
     data = _report(root)
     tree = etree.parse(str(root / "reports" / "junit.xml"))
     per_asset = sum(g in ("geometry", "hierarchy", "package") for _, g, _ in RULES.values())
-    per_scene = sum(g == "placement" for _, g, _ in RULES.values())
+    per_scene = sum(g in ("placement", "conductor") for _, g, _ in RULES.values())
     n_ext = sum(len(a["external"]) for a in data["assets"]) + len(data["scene"]["external"])
     assert len(tree.findall(".//testcase")) == 2 * per_asset + per_scene + n_ext
     failures = tree.xpath("//testcase[failure]/@name")

@@ -23,7 +23,7 @@ from .stats import machine
 
 
 def _sections(results: dict):
-    from . import blender_peer, builds, dataset, gazebo, gltf_transform, live, live_io, sections, viewer
+    from . import blender_peer, builds, conductors, dataset, gazebo, gltf_transform, live, live_io, sections, viewer
 
     return [
         ("build", builds.build_section),
@@ -31,6 +31,7 @@ def _sections(results: dict):
         ("viewer", viewer.viewer_section),
         ("lod", sections.lod_section),
         ("georef", sections.georef_section),
+        ("conductors", conductors.conductor_section),
         ("runtime", sections.runtime_section),
         ("sun", lambda ctx: sections.sun_section(ctx, results.get("runtime", {}).get("data"))),
         ("render", sections.render_section),

@@ -57,6 +57,8 @@ def build_asset(staging: Path, asset_toml: str, build: str, memo: str | None = N
         asset, models, alongside=lambda: check_asset(asset, cfg.triangle_budget, checked), memo=documents)
     source = {"file": cfg.source.name, "sha256": sha256_file(cfg.source), "config_sha256": sha256_file(cfg.path)}
     data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
+    # conductor attachment points, model frame: what the scene strings its spans between
+    data["terminals"] = [{"name": n, "position": list(xyz)} for n, xyz in cfg.terminals]
     data["findings"] = {"source": as_dicts(source_findings), "built": as_dicts(built_findings)}
     manifest.write(data, models / asset.id)
     return {"asset": asset.id, "triangles": [lod["triangles"] for lod in data["lods"]],

@@ -260,7 +260,11 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     # a placed asset that fails in this build is placed from its last package, so one
     # broken source does not hold back every other asset's changes; a failed terrain
     # (the ground every placement stands on) blocks the scene
-    scene = Task(name="scene", stage="scene", action=build_scene, args=args, inputs=inputs,
+    # the conductor types and clearance table are read by the scene alone
+    wiring = site.raw.get("wiring", {})
+    tables = [site.root / wiring.get("types", "conductors.toml"), site.root / wiring.get("clearances", "clearances.toml")]
+    scene_inputs = inputs + tuple(t.resolve() for t in tables if t.is_file())
+    scene = Task(name="scene", stage="scene", action=build_scene, args=args, inputs=scene_inputs,
                  deps=("terrain", *packages), params={"site": site.name}, code=code, outputs=("scene/",),
                  warm=SCENE_WARM, previous_ok=packages)
     return [terrain, scene]

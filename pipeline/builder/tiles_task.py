@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from .scene_record import scene_inputs
@@ -19,5 +20,7 @@ def build_tiles(staging: Path, sources: str, build: str, memo: str | None = None
     lod = {"screen_tolerance_px": site.screen_tolerance_px, "reference_hfov_rad": site.reference_hfov_rad,
            "reference_width_px": site.reference_width_px}
     kept = None if memo is None else (FileMemo(Path(memo), memo_namespace), ArrayMemo(Path(memo), memo_namespace))
+    wires = Path(build) / "scene" / "conductors.json"
+    conductors = json.loads(wires.read_text()) if wires.is_file() else None
     return tiles.write(Path(staging) / "tiles", models=Path(build) / "models", record=record, manifests=manifests,
-                       lod=lod, memo=kept)
+                       lod=lod, memo=kept, conductors=conductors)

@@ -111,6 +111,7 @@ def scan_floorplan(path, known_assets: set[str] | None = None, levels: set[str] 
     r = _Reading(path, options, known_assets, levels, to_m)
     platforms: list[ir.Platform] = []
     ignored: Counter[str] = Counter()
+    lines = []
     by_level = {lv.upper(): lv for lv in levels} if levels is not None else None
 
     _bound_expansion(r, doc)
@@ -123,6 +124,8 @@ def scan_floorplan(path, known_assets: set[str] | None = None, levels: set[str] 
                 platforms.append(_platform(e, path, to_m, by_level))
             except UserError as problem:
                 r.problems.append(problem)
+        elif kind in ("LINE", "LWPOLYLINE") and e.dxf.layer.upper() in options.conductor_layers:
+            lines.append(_conductor_line(e, to_m))
         else:
             ignored[kind] += 1
     _duplicates(r)
@@ -134,8 +137,21 @@ def scan_floorplan(path, known_assets: set[str] | None = None, levels: set[str] 
         ignored=tuple(sorted(ignored.items())),
         inserts=tuple(sorted(r.inserts.items())),
         warnings=tuple(_warnings(r, doc, platforms, levels)),
+        conductor_lines=tuple(lines),
     )
     return fp, r.problems
+
+
+def _conductor_line(e, to_m: float) -> tuple[str, str, tuple[tuple[float, float], ...]]:
+    """(handle, layer, plan vertices in metres) of a conductor layer's LINE or
+    LWPOLYLINE (in world coordinates: a polyline's OCS applied; closed ones close)."""
+    if e.dxftype() == "LINE":
+        pts = [tuple(e.dxf.start)[:2], tuple(e.dxf.end)[:2]]
+    else:
+        pts = [tuple(p)[:2] for p in e.vertices_in_wcs()]
+        if e.closed and pts:
+            pts.append(pts[0])
+    return e.dxf.handle, e.dxf.layer.upper(), tuple((float(x) * to_m, float(y) * to_m) for x, y in pts)
 
 
 def require_placements_and_platforms(fp: ir.FloorPlan) -> None:
@@ -512,7 +528,8 @@ def _floorplan_to_json(fp: ir.FloorPlan) -> dict:
     return {"path": fp.path, "units": fp.units, "placements": [asdict(p) for p in fp.placements],
             "platforms": [{"level": p.level, "outline": p.outline.tolist(), "handle": p.handle} for p in fp.platforms],
             "ignored": [list(i) for i in fp.ignored], "inserts": [list(i) for i in fp.inserts],
-            "warnings": list(fp.warnings)}
+            "warnings": list(fp.warnings),
+            "conductor_lines": [[h, layer, [list(v) for v in pts]] for h, layer, pts in fp.conductor_lines]}
 
 
 def _floorplan_from_json(d: dict) -> ir.FloorPlan:
@@ -522,4 +539,6 @@ def _floorplan_from_json(d: dict) -> ir.FloorPlan:
                         platforms=tuple(ir.Platform(p["level"], p["outline"], p["handle"]) for p in d["platforms"]),
                         ignored=tuple((str(k), int(n)) for k, n in d["ignored"]),
                         inserts=tuple((str(k), int(n)) for k, n in d["inserts"]),
-                        warnings=tuple(str(w) for w in d["warnings"]))
+                        warnings=tuple(str(w) for w in d["warnings"]),
+                        conductor_lines=tuple((str(h), str(layer), tuple((float(x), float(y)) for x, y in pts))
+                                              for h, layer, pts in d.get("conductor_lines", [])))

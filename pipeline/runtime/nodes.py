@@ -20,7 +20,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import camera
+from . import camera, thermal
 from .. import sun
 
 
@@ -329,7 +329,42 @@ class Render(Node):
         return {}
 
 
-NODE_TYPES: dict[str, type[Node]] = {cls.type_name: cls for cls in (Clock, Constant, Linear, OilTank, Bushing, Sun, Camera, Render)}
+class ConductorThermal(Node):
+    """A conductor's steady-state temperature (degC) from its phase current (A, shared
+    by the bundle's subconductors), IEEE 738 style (runtime.thermal). Ambient air,
+    wind and irradiance come from their inputs when wired (irradiance from a sun
+    node), else from the params. Feeding render.conductors.temperature makes every
+    span's sag follow (runtime.apply_conductors)."""
+
+    type_name = "conductor_thermal"
+    inputs = {"current": Port("float", "A"), "ambient": Port("float", "degC", required=False),
+              "wind": Port("float", "m/s", required=False), "irradiance": Port("float", "W/m2", required=False)}
+    outputs = {"temperature": Port("float", "degC")}
+    params = {"diameter_m": None, "r25_ohm_per_km": None, "r75_ohm_per_km": None, "bundle_count": 1,
+              "ambient_c": 30.0, "wind_m_s": 0.6, "irradiance_w_m2": 0.0, "emissivity": 0.5, "absorptivity": 0.5,
+              "elevation_m": 0.0}
+
+    def __init__(self, node_id, params, ctx):
+        super().__init__(node_id, params, ctx)
+        for key in ("diameter_m", "r25_ohm_per_km", "r75_ohm_per_km", "ambient_c", "wind_m_s", "emissivity",
+                    "absorptivity", "elevation_m", "irradiance_w_m2"):
+            _float(self.p, key)
+        if int(self.p["bundle_count"]) < 1:
+            raise ValueError("bundle_count must be at least 1")
+
+    def step(self, t, inputs):
+        p = self.p
+        return {"temperature": thermal.temperature(
+            abs(float(inputs["current"])) / int(p["bundle_count"]), float(inputs.get("ambient", p["ambient_c"])),
+            diameter_m=float(p["diameter_m"]), r25_ohm_per_km=float(p["r25_ohm_per_km"]),
+            r75_ohm_per_km=float(p["r75_ohm_per_km"]), wind_m_s=float(inputs.get("wind", p["wind_m_s"])),
+            irradiance_w_m2=float(inputs.get("irradiance", p["irradiance_w_m2"])), emissivity=float(p["emissivity"]),
+            absorptivity=float(p["absorptivity"]), elevation_m=float(p["elevation_m"]))}
+
+
+NODE_TYPES: dict[str, type[Node]] = {cls.type_name: cls for cls in (Clock, Constant, Linear, OilTank, Bushing, Sun, Camera,
+                                                                    Render, ConductorThermal)}
+CONDUCTORS_STATE = "conductors"  # render.conductors.temperature drives every span's sag
 
 
 # --- the render node's mapping M_k ----------------------------------------------------
@@ -504,6 +539,8 @@ def unbound_inputs(values_ports: list[str], observed: list[Observed]) -> list[st
     bad = []
     for port in values_ports:
         m = _RENDER_PORT.match(port)
+        if m and (m.group(1), m.group(2)) == (CONDUCTORS_STATE, "temperature"):
+            continue  # the spans' temperature, not a placement's binding
         if m and (m.group(1), m.group(2)) not in bound:
             bad.append(port)
     return sorted(bad)

@@ -33,6 +33,7 @@ class RunData:
     sun: list[tuple[float, float, float]] | None
     observed: list[nodes.Observed]
     sun_intensity_scale: float = 1.0
+    conductor_temperature: list[float | None] | None = None  # render.conductors.temperature per step
 
 
 def _scene_index(build_dir: Path) -> dict:
@@ -88,9 +89,10 @@ def simulate(scenario: graph.Scenario, observed: list[nodes.Observed]) -> tuple[
                             f"no placement in the built scene binds {', '.join(bad)} (STATE.variable)")
     engine = graph.Engine(g)
     mapper = nodes.VisualMapper(observed)
-    times, frames, sun, records = [], [], [] if sun_id else None, []
+    times, frames, sun, records, wires = [], [], [] if sun_id else None, [], []
     for report in engine.run():
         times.append(report.t)
+        wires.append(render.values.get(nodes.CONDUCTORS_STATE, {}).get("temperature") if render is not None else None)
         frames.append(mapper.states(render.values) if render is not None else [])
         if sun_id:
             v = engine.values
@@ -98,7 +100,8 @@ def simulate(scenario: graph.Scenario, observed: list[nodes.Observed]) -> tuple[
         records.append({"k": report.k, "t": report.t, "ran": report.count,
                         "outputs": {f"{n}.{p}": v for (n, p), v in sorted(engine.values.items())}})
     scale = float(render.p["sun_intensity_scale"]) if render is not None else 1.0
-    return RunData(scenario, times, frames, sun, observed, scale), records
+    wired = any(v is not None for v in wires)
+    return RunData(scenario, times, frames, sun, observed, scale, wires if wired else None), records
 
 
 def _num(v):
@@ -146,11 +149,24 @@ def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = No
             from . import apply_usd
 
             summary["appliers"]["usd"] = apply_usd.write(data, scenes[0], out / "states.usda")
+            wires = build_dir / "scene" / "conductors.json"
+            if data.conductor_temperature is not None and wires.is_file():
+                from . import apply_conductors
+
+                summary["appliers"]["conductors_usd"] = apply_conductors.write(
+                    wires, scenes[0], out / "conductors.usda", data.times, data.conductor_temperature,
+                    scenario.step_s)
         step("usd")  # done, or nothing to apply to
     if "gltf" in formats:
         from . import apply_gltf
 
         summary["appliers"]["gltf"] = apply_gltf.write(data, out / "gltf")
+        wires = build_dir / "scene" / "conductors.json"
+        if data.conductor_temperature is not None and wires.is_file():
+            from . import apply_conductors
+
+            summary["appliers"]["conductors_gltf"] = apply_conductors.write_gltf(
+                wires, out / "gltf" / "conductors.glb", data.times, data.conductor_temperature)
         step("gltf")
     if "sdf" in formats:
         from . import apply_sdf

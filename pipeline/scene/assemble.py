@@ -19,7 +19,7 @@ from .. import sun as sun_model
 from ..fork_join import beside
 from ..export import names
 from . import placements as placing
-from . import scene_gltf, stage_usd, world_sdf
+from . import conductor_outputs, conductors, scene_gltf, stage_usd, world_sdf
 from .checks import check_placements
 from .terrain import terrain_asset
 
@@ -97,35 +97,45 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     from ..export import manifest
     from .terrain import height_at
 
+    from ..wiring import load_wiring
+
     site, fp, georef = _load(Path(sources), Path(build))
+    wiring = load_wiring(site)
     models = Path(build) / "models"
     used = sorted({p.asset_id for p in fp.placements})
     manifests = {a: manifest.read(models / a) for a in used}
     placed = placing.place(site, list(fp.placements), georef)
     eyes = placing.inspection_points_enu(site, georef)
     placed = placing.choose_lods(placed, manifests, eyes, site)
+    spans = conductors.build(site, wiring, placed, manifests, georef, eyes, fp.conductor_lines)
     origin = georef.origin_llh
     sun = scene_sun(site, origin)
     tname = config.terrain_model_name(site)
-    terrain_manifest = manifest.read(models / tname)
 
     lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     out = Path(staging) / "scene"
     out.mkdir(parents=True, exist_ok=True)
+    conductors.write_record(out / "conductors.json", spans, wiring)
+    wires = conductor_outputs.sdf_model(spans, out, capsules=wiring.collision == "capsules")
 
     def sdf_and_usd():
         world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
                         terrain_model=tname, sun=sun, models=models,
-                        own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")))
+                        own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")),
+                        extra_models=() if wires is None else (wires,))
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
-                        articulated=frozenset(a for a, m in manifests.items() if m.get("joints")))
+                        articulated=frozenset(a for a, m in manifests.items() if m.get("joints")),
+                        extra=lambda site_prim: conductor_outputs.add_usd(site_prim, spans))
 
     def gltf_checks_and_record():
         scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
-                         origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun)
-        terrain_z = _terrain_heights(models / tname, placed, terrain_manifest, height_at)
-        findings = check_placements(site, fp, placed, manifests, terrain_z)
+                         origin_llh=origin, crs=site.crs, site_name=site.name, sun=sun,
+                         extra=lambda sb: conductor_outputs.add_gltf(sb, spans))
+        terrain = _terrain_asset(models / tname)
+        en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))
+        findings = check_placements(site, fp, placed, manifests, height_at(terrain, en))
+        findings += _clearance_findings(site, wiring, spans, lambda xy: height_at(terrain, xy))
         record = _placements_record(site, fp, placed, origin, sun, tname, lod_hist, findings)
         (out / "placements.json").write_text(_json_by_line(record))
         return len(findings)
@@ -133,7 +143,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     # two halves of about equal cost (USD the largest part of one, glTF of the
     # other) side by side, when a core is spare
     _, finding_count = beside(sdf_and_usd, gltf_checks_and_record)
-    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": finding_count}
+    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": finding_count, "conductors": len(spans)}
 
 
 def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hist: dict, findings: list) -> dict:
@@ -176,9 +186,22 @@ def _json_by_line(record: dict) -> str:
     return "{\n" + ",\n".join(fields) + "\n}\n"
 
 
-def _terrain_heights(folder: Path, placed, terrain_manifest, height_at) -> np.ndarray:
-    """Terrain z under each placement, read back from the built terrain glTF so the
-    check tests what was written, not what was meant."""
+def _clearance_findings(site, wiring, spans, ground) -> list[dict]:
+    """The conductors' clearance findings (scene.clearance) as dicts, when the
+    sources hold a clearance table."""
+    from ..findings import as_dicts
+    from . import clearance
+
+    table = site.root / site.raw.get("wiring", {}).get("clearances", "clearances.toml")
+    if not spans or not table.is_file() or not table.resolve().is_relative_to(site.root.resolve()):
+        return []
+    found, _ = clearance.check(spans, clearance.load_table(table), ground)
+    return as_dicts(found)
+
+
+def _terrain_asset(folder: Path):
+    """The terrain read back from the built terrain glTF, so the checks test what
+    was written, not what was meant."""
     from .. import ir
 
     doc, binary = glb.read(folder / names.gltf_file(folder.name))
@@ -189,6 +212,4 @@ def _terrain_heights(folder: Path, placed, terrain_manifest, height_at) -> np.nd
         idx = glb.accessor(doc, binary, prim["indices"]).reshape(-1, 3)
         pos = (np.c_[pos, np.ones(len(pos))] @ (m.T @ glb.Z_TO_Y))[:, :3]  # Y-up -> ENU
         visuals.append(ir.Visual(str(ni), "x", (ir.Mesh(pos, idx),)))
-    terrain = ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=visuals),))
-    en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))
-    return height_at(terrain, en)
+    return ir.Asset(id="t", category="terrain", links=(ir.Link("t", visuals=visuals),))

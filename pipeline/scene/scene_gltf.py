@@ -149,7 +149,8 @@ def _per_placement(sb: SceneBuilder, asset_id: str, lod: int, doc: dict, binary:
 
 
 def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str, origin_llh,
-          crs: str, site_name: str, sun: dict) -> None:
+          crs: str, site_name: str, sun: dict, extra=None) -> None:
+    """`extra(sb)`: adds meshes and nodes of its own (the conductors)."""
     sb = SceneBuilder()
     groups: dict[tuple[str, int], list[Placed]] = defaultdict(list)
     for pl in sorted(placed, key=lambda p: p.placement.tag):
@@ -199,6 +200,8 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
         sb.used_ext.add("EXT_mesh_gpu_instancing")
         sb.add_node(node)
 
+    if extra is not None:
+        extra(sb)
     d = -np.array([np.sin(np.radians(sun["azimuth_deg"])) * np.cos(np.radians(sun["elevation_deg"])),
                    np.cos(np.radians(sun["azimuth_deg"])) * np.cos(np.radians(sun["elevation_deg"])),
                    np.sin(np.radians(sun["elevation_deg"]))])

@@ -44,8 +44,9 @@ def sun_orientation(elevation_deg: float, azimuth_deg: float):
 
 
 def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, placed: list[Placed],
-          terrain_model: str, sun: dict, articulated: frozenset[str] = frozenset()) -> None:
-    """`articulated`: asset ids with joints. Their placements are not instanceable:
+          terrain_model: str, sun: dict, articulated: frozenset[str] = frozenset(), extra=None) -> None:
+    """`extra(site_prim)`: authors more prims under /Site (the conductors).
+    `articulated`: asset ids with joints. Their placements are not instanceable:
     physics refuses RigidBodyAPI on instance proxies, and each one's joints move on
     their own (a switch open here, closed there)."""
     from pxr import Gf, Sdf, Vt
@@ -97,5 +98,7 @@ def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, pla
     _attr(light, "xformOp:orient", Sdf.ValueTypeNames.Quatd, sun_orientation(sun["elevation_deg"], sun["azimuth_deg"]))
     _attr(light, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, Vt.TokenArray(["xformOp:orient"]), uniform=True)
 
+    if extra is not None:
+        extra(site)
     with atomic_path(path) as tmp:  # its temporary name keeps .usda: Export's format
         layer.Export(str(tmp))

@@ -50,9 +50,10 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
 
 
 def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terrain_model: str,
-          sun: dict, models: Path, own_model: frozenset[str] = frozenset()) -> None:
+          sun: dict, models: Path, own_model: frozenset[str] = frozenset(), extra_models=()) -> None:
     """models: the folder of the built packages (variants are read from it);
-    own_model: asset ids whose placements stay one <include> each."""
+    own_model: asset ids whose placements stay one <include> each; extra_models:
+    lxml <model> elements appended to the world (the conductors)."""
     sdf = etree.Element("sdf", version="1.9")
     world = etree.SubElement(sdf, "world", name=site_name)
     sph = etree.SubElement(world, "spherical_coordinates")
@@ -100,6 +101,8 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
         world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members))
+    for model in extra_models:
+        world.append(model)
     data = etree.tostring(sdf, pretty_print=True, xml_declaration=True, encoding="UTF-8")
     Path(path).write_bytes(data)
 

@@ -340,7 +340,7 @@ def _targets(report: dict):
     for a in report["assets"]:
         yield a["id"], a["findings"], ("geometry", "hierarchy", "package")
     if report["scene"]["present"]:
-        yield f"scene.{report['scene']['site']}", report["scene"]["findings"], ("placement",)
+        yield f"scene.{report['scene']['site']}", report["scene"]["findings"], ("placement", "conductor")
 
 
 def to_junit(report: dict) -> bytes:

@@ -280,11 +280,12 @@ def _linked(out: Path, name: str, memo) -> bool:
     return (out / name).is_file() or memo[0].link(f"image\0{name}", out / name)
 
 
-def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], lod: dict, memo=None) -> dict:
+def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], lod: dict, memo=None,
+          conductors: dict | None = None) -> dict:
     """tiles/ of a built scene into `out` (the folder made): `record` placements.json,
     `manifests` the placed models' manifest.json, `lod` the site's [lod] settings
     (screen_tolerance_px, reference_hfov_rad, reference_width_px), `memo` see
-    packs_of. Returns figures."""
+    packs_of, `conductors` conductors.json (its spans one tile). Returns figures."""
     out = Path(out)
     (out / "content").mkdir(parents=True, exist_ok=True)
     (out / "meshes").mkdir(exist_ok=True)
@@ -330,6 +331,9 @@ def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], 
         equipment = tree(poses[:, :2, 3], top, targets)
         fill(equipment, math.inf)
         children.append(_tile_json(equipment))
+    wires = _conductor_tile(out, conductors) if conductors else None
+    if wires is not None:
+        children.append(wires)
     boxes = [np.array(c["_box"]) for c in children]
     whole = union(boxes) if boxes else np.zeros((2, 3))
     for c in children:
@@ -379,4 +383,52 @@ def _terrain_tile(out: Path, models: Path, name: str) -> dict | None:
     pts = np.concatenate(points)
     box = np.stack([pts.min(axis=0), pts.max(axis=0)])
     return {"boundingVolume": box_volume(box), "geometricError": 0.0, "content": {"uri": "terrain.glb"},
+            "_box": box.tolist()}
+
+
+CONDUCTOR_COLOR = [0.62, 0.63, 0.64, 1.0]
+
+
+def _conductor_tile(out: Path, record: dict) -> dict | None:
+    """conductors.glb: the spans' tubes at their chosen LOD, merged per conductor type
+    (a mesh each, vertices relative to the tile's centre), as one leaf tile."""
+    from ..geometry.wires import bundle_paths, tube
+
+    per_type: dict[str, list] = {}
+    for s in record.get("spans", []):
+        t = record["types"][s["type"]]
+        pts = np.array(s["lods"][s["lod"]]["points"], dtype=np.float64)
+        d = np.subtract(s["to"]["enu"], s["from"]["enu"])[:2]
+        horizontal = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else np.array([1.0, 0.0])
+        for path in bundle_paths(pts, horizontal, np.array(t["bundle_offsets_m"])):
+            per_type.setdefault(s["type"], []).append(tube(path, t["diameter_m"] / 2.0, 6))
+    if not per_type:
+        return None
+    allv = np.concatenate([v for parts in per_type.values() for v, _, _ in parts])
+    box = np.stack([allv.min(axis=0), allv.max(axis=0)])
+    centre = np.round((box[0] + box[1]) / 2.0, 3)
+    doc = {"asset": {"version": "2.0", "generator": "substation-twin"}, "scene": 0, "buffers": [{}], "bufferViews": [],
+           "accessors": [], "meshes": [], "nodes": [],
+           "materials": [{"name": "conductor_aluminium", "pbrMetallicRoughness": {
+               "baseColorFactor": CONDUCTOR_COLOR, "metallicFactor": 0.9, "roughnessFactor": 0.45}}]}
+    buf = glb.Buffer(doc["bufferViews"], doc["accessors"])
+    for name, parts in sorted(per_type.items()):
+        base, faces = 0, []
+        for v, f, _ in parts:
+            faces.append(f + base)
+            base += len(v)
+        pos = glb.points_to_y_up(np.concatenate([v for v, _, _ in parts]) - centre).astype(np.float32)
+        nrm = glb.points_to_y_up(np.concatenate([n for _, _, n in parts])).astype(np.float32)
+        prim = {"attributes": {"POSITION": buf.add_accessor(pos, "VEC3", 34962, bounds=True),
+                               "NORMAL": buf.add_accessor(nrm, "VEC3", 34962)},
+                "indices": buf.add_accessor(np.concatenate(faces).reshape(-1).astype(np.uint32), "SCALAR", 34963),
+                "material": 0}
+        doc["meshes"].append({"name": name, "primitives": [prim]})
+        doc["nodes"].append({"name": name, "mesh": len(doc["meshes"]) - 1})
+    doc["nodes"].append({"name": "conductors", "children": list(range(len(doc["meshes"]))),
+                         "translation": [float(c) for c in glb.points_to_y_up(centre)]})
+    doc["scenes"] = [{"nodes": [len(doc["nodes"]) - 1]}]
+    doc["buffers"][0] = {"byteLength": glb.padded_length(buf.binary)}
+    glb.write(out / "conductors.glb", doc, bytes(buf.binary))
+    return {"boundingVolume": box_volume(box), "geometricError": 0.0, "content": {"uri": "conductors.glb"},
             "_box": box.tolist()}

@@ -357,8 +357,9 @@ def keep_material(name: str) -> None:
 
 def write_asset_toml(out: Path, asset_id: str, category: str, description: str, *, budgets,
                      collision: str = "hull_per_link", triangle_budget: int = 400000,
-                     mass_kg: float = 100.0) -> Path:
-    """<out>/<asset_id>/asset.toml in the schema of schemas/asset.schema.json."""
+                     mass_kg: float = 100.0, terminals=()) -> Path:
+    """<out>/<asset_id>/asset.toml in the schema of schemas/asset.schema.json;
+    `terminals`: (name, (x, y, z)) conductor attachment points in the model frame."""
     lines = [
         f'category = "{category}"',
         f'description = "{description}"',
@@ -372,11 +373,21 @@ def write_asset_toml(out: Path, asset_id: str, category: str, description: str, 
         "[collision]",
         f'mode = "{collision}"',
         "",
+        *terminal_lines(terminals),
     ]
     path = out / asset_id / "asset.toml"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines))
     return path
+
+
+def terminal_lines(terminals) -> list[str]:
+    """asset.toml [[terminals]] tables, positions to the micrometre."""
+    lines = []
+    for name, xyz in terminals:
+        lines += ["[[terminals]]", f'name = "{name}"',
+                  "position = [" + ", ".join(repr(round(float(v), 6) + 0.0) for v in xyz) + "]", ""]
+    return lines
 
 
 def finish(asset_id: str, out: Path) -> Path:

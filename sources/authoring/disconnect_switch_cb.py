@@ -82,7 +82,8 @@ def main() -> None:
     P.write_asset_toml(out, ASSET_ID, "switchgear",
                        "centre-break disconnector, one pole, two rotating post-insulator columns",
                        budgets=(0.003, 0.015, 0.06), collision="hull_per_link",
-                       triangle_budget=100000, mass_kg=650.0)
+                       triangle_budget=100000, mass_kg=650.0,
+                       terminals=[(name, (sign * COLUMN_X, 0.0, BLADE_Z + 0.08)) for name, sign in (("a", -1), ("b", 1))])
 
 
 if __name__ == "__main__":

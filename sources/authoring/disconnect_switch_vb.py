@@ -85,7 +85,8 @@ def main() -> None:
     P.finish(ASSET_ID, out)
     P.write_asset_toml(out, ASSET_ID, "switchgear",
                        "vertical-break disconnector, one pole, blade hinged on the operating column",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=600.0)
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=600.0,
+                       terminals=[("a", (-COLUMN_X, 0.0, COLUMN_BASE + COLUMN_HEIGHT + 0.1)), ("b", (COLUMN_X, 0.0, HINGE_Z + 0.05))])
 
 
 if __name__ == "__main__":

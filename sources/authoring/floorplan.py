@@ -327,7 +327,7 @@ def write(plan: Plan, out: Path) -> None:
         doc = ezdxf.new("R2010", setup=False)
         doc.header["$INSUNITS"] = 6
         doc.header["$MEASUREMENT"] = 1
-        for name in (*(f"PLATFORM_{lv}" for lv in PLATFORMS), "ANNOTATION", "EQUIPMENT"):
+        for name in (*(f"PLATFORM_{lv}" for lv in PLATFORMS), "ANNOTATION", "EQUIPMENT", *_sibling("wiring_plan").LAYERS):
             doc.layers.add(name)
         for asset in sorted(FOOTPRINT):
             # The block is a symbol: the footprint rectangle and attribute definitions.
@@ -346,12 +346,27 @@ def write(plan: Plan, out: Path) -> None:
                 attrs["STATE"] = item.state
             for k, (name, value) in enumerate(attrs.items()):
                 ref.add_attrib(name, value, (item.x, item.y - 0.3 * k), dxfattribs={"height": 0.25})
+        wiring_plan = _sibling("wiring_plan")
+        wiring_plan.draw(msp, wiring_plan.build(plan.items, D_CENTRES, P500, REACTOR_BANKS, B_CENTRES, P230))
         annotate(msp)
         fix_class_order(doc)
         out.parent.mkdir(parents=True, exist_ok=True)
         doc.saveas(out)
     finally:
         ezdxf.options.write_fixed_meta_data_for_testing = previous
+
+
+def _sibling(name: str):
+    """A module beside this script, also when this one is loaded by its path."""
+    import importlib.util
+    import sys
+
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, HERE / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
 
 
 def fix_class_order(doc) -> None:

@@ -29,6 +29,9 @@ BEAM_HALF_Y = 0.5
 BEAM_PANELS = 19
 PHASE_X = (-5.0, 0.0, 5.0)
 STRING_LENGTH = 2.6
+# a phase's conductors hang from the clamp at the foot of its insulator string
+CLAMP_Z = BEAM_BOTTOM - 0.05 - STRING_LENGTH - 0.04
+TERMINALS = [(f"p{i}", (x, 0.0, CLAMP_Z)) for i, x in enumerate(PHASE_X, start=1)]
 
 
 def column_sections(x: float):
@@ -85,7 +88,7 @@ def main() -> None:
     P.write_asset_toml(out, ASSET_ID, "gantry",
                        "Lattice steel line gantry, columns 20 m apart, three suspension insulator strings",
                        budgets=[0.01, 0.05, 0.2], collision="hull_per_part",
-                       triangle_budget=300000, mass_kg=9000.0)
+                       triangle_budget=300000, mass_kg=9000.0, terminals=TERMINALS)
 
 
 if __name__ == "__main__":

@@ -96,7 +96,7 @@ def main() -> None:
         "tessellation_tolerance_m": TESSELLATION_M,
         "triangle_budget": 80000,
         "mass_kg": 240.0,
-    }, [0.003, 0.015, 0.06], "hull_per_link")
+    }, [0.003, 0.015, 0.06], "hull_per_link", terminals=[("top", (0.0, 0.0, HEIGHT / 1000.0))])
 
 
 if __name__ == "__main__":

@@ -44,6 +44,10 @@ def top_cap(z: float) -> None:
     P.box("line_terminal_pad", (0.12, 0.02, 0.1), (0.0, 0.0, z + 0.42), "aluminium")
 
 
+# the line terminal pad on the top cap of the two capacitor units
+TERMINALS = [("line", (0.0, 0.0, BASE_TOP + 2 * UNIT_HEIGHT + 0.47))]
+
+
 def main() -> None:
     out = kit.parse_out()
     kit.new_scene()
@@ -51,7 +55,7 @@ def main() -> None:
     top_cap(capacitor_units())
     P.finish(ASSET_ID, out)
     P.write_asset_toml(out, ASSET_ID, "instrument_transformer", "capacitive voltage transformer, one phase",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=900.0)
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=900.0, terminals=TERMINALS)
 
 
 if __name__ == "__main__":

@@ -69,11 +69,15 @@ def fan_blades(name: str, center, count: int = 5):
     return P.mesh(name, verts, faces, "painted_grey", center)
 
 
+# the bushing tops (dome caps), left to right: what bushings() builds
+BUSHINGS = (("hv", -2.0, 4.1, 0.16, 0.3, 0.7), ("mv", 0.5, 2.5, 0.13, 0.24, 0.5), ("neutral", 2.6, 0.9, 0.08, 0.15, 0.3))
+TERMINALS = [(name, (x, 0.0, TANK_TOP + 0.15 + turret + 0.06 + height + 0.12))
+             for name, x, height, _, _, turret in BUSHINGS]
+
+
 def bushings() -> None:
     """HV (500 kV), MV (230 kV) and neutral bushings on turrets, left to right."""
-    for name, x, height, r_core, r_big, turret_h in (("hv", -2.0, 4.1, 0.16, 0.3, 0.7),
-                                                     ("mv", 0.5, 2.5, 0.13, 0.24, 0.5),
-                                                     ("neutral", 2.6, 0.9, 0.08, 0.15, 0.3)):
+    for name, x, height, r_core, r_big, turret_h in BUSHINGS:
         z0 = TANK_TOP + 0.15
         P.cylinder(f"turret_{name}", 0.42 if name != "neutral" else 0.22, turret_h, (x, 0.0, z0 + turret_h / 2),
                    "painted_tank", "Z", 48)
@@ -120,7 +124,7 @@ def main() -> None:
     P.finish(ASSET_ID, out)
     P.write_asset_toml(out, ASSET_ID, "transformer",
                        "500/230 kV single-phase autotransformer with a main-tank dial gauge",
-                       budgets=(0.004, 0.02, 0.08), triangle_budget=300000, mass_kg=260000.0)
+                       budgets=(0.004, 0.02, 0.08), triangle_budget=300000, mass_kg=260000.0, terminals=TERMINALS)
 
 
 if __name__ == "__main__":

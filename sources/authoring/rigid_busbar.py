@@ -21,6 +21,9 @@ CAP_R = 0.125
 COUPLER_AT = (-2.0, 2.0)     # positions of the welded couplers along the tube
 COUPLER = 0.108, 0.15        # radius, length
 SEGMENTS = 64
+# taps on the tube's top every metre (the ends rest on supports, whose clamps are the
+# terminals there): at_m5 .. at_0 .. at_p5
+TERMINALS = [(f"at_{'m' if k < 0 else 'p' if k > 0 else ''}{abs(k)}", (float(k), 0.0, TUBE_R)) for k in range(-5, 6)]
 
 
 def end_cap(sign: float):
@@ -53,7 +56,7 @@ def main() -> None:
     P.write_asset_toml(out, ASSET_ID, "busbar",
                        "Rigid aluminium tube busbar, 12 m along X, 0.2 m diameter, centred at z = 0",
                        budgets=[0.002, 0.01, 0.04], collision="box",
-                       triangle_budget=20000, mass_kg=75.0)
+                       triangle_budget=20000, mass_kg=75.0, terminals=TERMINALS)
 
 
 if __name__ == "__main__":

@@ -120,7 +120,8 @@ def main() -> None:
     P.finish(ASSET_ID, out)
     P.write_asset_toml(out, ASSET_ID, "reactor",
                        "500 kV single-phase shunt reactor with main-tank dial gauge and two bushing sight glasses",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=250000, mass_kg=180000.0)
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=250000, mass_kg=180000.0,
+                       terminals=[("hv", (-BUSHING_X, 0.0, 7.51)), ("neutral", (BUSHING_X, 0.0, 7.51))])
 
 
 if __name__ == "__main__":

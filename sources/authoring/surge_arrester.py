@@ -138,11 +138,15 @@ def write_step(path: Path) -> Path:
     return path
 
 
-def write_asset_toml(folder: Path, fields: dict, lod_budgets, collision: str) -> Path:
-    """asset.toml (schemas/asset.schema.json) from flat `fields`, in the given order."""
+def write_asset_toml(folder: Path, fields: dict, lod_budgets, collision: str, terminals=()) -> Path:
+    """asset.toml (schemas/asset.schema.json) from flat `fields`, in the given order;
+    `terminals`: (name, (x, y, z)) conductor attachment points, metres, Z up."""
     lines = [f"{key} = {toml_value(value)}" for key, value in fields.items()]
     lines += ["", "[lod]", f"budgets_m = {toml_value(list(lod_budgets))}",
               "", "[collision]", f'mode = "{collision}"', ""]
+    for name, xyz in terminals:
+        lines += ["[[terminals]]", f'name = "{name}"',
+                  "position = [" + ", ".join(repr(round(float(v), 6) + 0.0) for v in xyz) + "]", ""]
     path = folder / "asset.toml"
     path.write_text("\n".join(lines), encoding="utf-8", newline="\n")
     return path
@@ -180,7 +184,7 @@ def main() -> None:
         "tessellation_tolerance_m": TESSELLATION_M,
         "triangle_budget": 100000,
         "mass_kg": 180.0,
-    }, [0.003, 0.015, 0.06], "hull_per_link")
+    }, [0.003, 0.015, 0.06], "hull_per_link", terminals=[("line", (0.0, 0.0, TERMINAL[1] / 1000.0))])
 
 
 if __name__ == "__main__":
