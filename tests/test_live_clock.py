@@ -113,3 +113,31 @@ def test_a_held_input_let_go_reads_its_edge_again(tmp_path):
     assert twin.get([port])[port] == twin.get(["tank.level"])["tank.level"] == pytest.approx(70.0 * 1.01)
     with pytest.raises(ValueError, match="output"):
         twin.set({"tank.level": None})
+
+
+def test_show_only_hides_exactly_the_other_placements(tmp_path):
+    """CyclesScene.show_only writes every object's render flag at once (foreach_set):
+    the loaded placements not named are hidden, the named ones shown, lights untouched."""
+    pytest.importorskip("bpy")
+    from pipeline.render.cycles import CyclesScene
+    from pipeline.render.sensor import PhoneCamera
+    from pipeline.runtime.site import load_site
+
+    build, sources, _ = live_scene.make(tmp_path)
+    scene = CyclesScene(load_site(build, sources), PhoneCamera(width=16, height=12, samples=1), 0)
+    try:
+        scene.load_many(["R-1", "R-2"])
+        scene.sun.hide_render = True
+
+        def hidden():
+            return {tag: {ob.hide_render for ob in objs.values()} for tag, objs in scene.objects.items()}
+
+        scene.show_only(["R-1"])
+        assert hidden() == {"R-1": {False}, "R-2": {True}} and scene.sun.hide_render and not scene.moon.hide_render
+        scene.show_only(["R-2"])
+        assert hidden() == {"R-1": {True}, "R-2": {False}}
+        scene.load("R-1")  # already loaded: nothing new
+        scene.show_only(["R-1", "R-2"])
+        assert hidden() == {"R-1": {False}, "R-2": {False}}
+    finally:
+        scene.close()
