@@ -165,3 +165,30 @@ def test_show_only_hides_exactly_the_other_placements(tmp_path):
         assert hidden() == {"R-1": {False}, "R-2": {False}}
     finally:
         scene.close()
+
+
+def test_a_browser_that_falls_behind_loses_messages_counted_and_told():
+    """The WebSocket side never waits: a full queue drops the message, counts it, and
+    the browser's next delivered message says how many it missed."""
+    import asyncio
+    import json
+
+    from pipeline.live import websocket
+
+    async def run():
+        feed = websocket.WebSocketFeed(hello=dict, snapshot=dict)
+        slow, fast = websocket._Client(), websocket._Client()
+        feed.clients |= {slow, fast}
+        for seq in range(websocket.QUEUE + 5):
+            feed.publish({"seq": seq, "values": {}})
+            fast.queue.get_nowait()  # this one keeps up
+        assert slow.queue.qsize() == websocket.QUEUE and feed.dropped == 5 and fast.dropped == 0
+        first = json.loads(slow.queue.get_nowait())
+        assert first["seq"] == 0 and "dropped" not in first
+        feed.publish({"seq": 999, "values": {}})
+        while slow.queue.qsize() > 1:
+            slow.queue.get_nowait()
+        last = json.loads(slow.queue.get_nowait())
+        assert last == {"seq": 999, "values": {}, "dropped": 5} and slow.dropped == 0
+
+    asyncio.run(run())
