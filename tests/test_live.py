@@ -75,10 +75,15 @@ def twin(scene):
     proc, endpoints = start_twin(build, sources, "--sensor", config, "--start", START)
     client = Client(endpoints["commands"])
     yield proc, endpoints, client
+    client.close()
     if proc.poll() is None:
         proc.send_signal(signal.SIGTERM)
-        proc.wait(30)
-    client.close()
+        try:
+            proc.wait(60)
+        finally:
+            if proc.poll() is None:  # never leave a twin behind, whatever failed
+                proc.kill()
+                proc.wait(10)
 
 
 def test_hello_describes_the_twin(twin):
@@ -497,9 +502,13 @@ def test_the_live_page_moves_the_pointer_within_a_second_of_a_set(scene):
     finally:
         if page is not None and page.poll() is None:
             page.kill()
-        c("shutdown")
-        proc.wait(30)
         c.close()
+        proc.terminate()
+        try:
+            proc.wait(60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
 
 
 # --- bad command lines ----------------------------------------------------------------------

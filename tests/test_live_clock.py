@@ -113,3 +113,82 @@ def test_a_held_input_let_go_reads_its_edge_again(tmp_path):
     assert twin.get([port])[port] == twin.get(["tank.level"])["tank.level"] == pytest.approx(70.0 * 1.01)
     with pytest.raises(ValueError, match="output"):
         twin.set({"tank.level": None})
+
+
+def test_show_only_hides_exactly_the_other_placements(tmp_path):
+    """CyclesScene.show_only writes every object's render flag at once (foreach_set):
+    the loaded placements not named are hidden, the named ones shown, lights untouched."""
+    pytest.importorskip("bpy")
+    from pipeline.render.cycles import CyclesScene
+    from pipeline.render.sensor import PhoneCamera
+    from pipeline.runtime.site import load_site
+
+    build, sources, _ = live_scene.make(tmp_path)
+    scene = CyclesScene(load_site(build, sources), PhoneCamera(width=64, height=48, samples=1), 0)
+    try:
+        import numpy as np
+
+        from pipeline.geometry.pinhole import look_at
+        from pipeline.runtime import camera as camera_model
+        from pipeline.runtime.site import Shot
+
+        scene.load_many(["R-1", "R-2"])
+        scene.set_instances({"R-1": 1, "R-2": 2})
+        when = dt.datetime(2025, 3, 20, 12, tzinfo=dt.timezone.utc)
+        scene.set_shot(Shot(when, look_at((0.25, -14.0, 3.0), (0.25, -2.0, 0.5)), camera_model.lens(1.0), 1.0, 1.0,
+                            800.0), None)
+
+        def seen():  # what a render shows: its instance ids
+            ids, _ = scene.render_labels()
+            return set(np.unique(ids).tolist()) - {0}
+
+        assert seen() == {1, 2}
+        scene.sun.hide_render, moon = True, scene.moon.hide_render
+
+        def hidden():
+            return {tag: {ob.hide_render for ob in objs.values()} for tag, objs in scene.objects.items()}
+
+        both = scene.render()
+        scene.show_only(["R-1"])
+        only_1 = scene.render()  # the picture first: the label pass's own settings must not be what updates it
+        assert hidden() == {"R-1": {False}, "R-2": {True}} and scene.sun.hide_render and scene.moon.hide_render == moon
+        assert seen() == {1}
+        scene.show_only(["R-2"])
+        only_2 = scene.render()
+        assert hidden() == {"R-1": {True}, "R-2": {False}}
+        assert seen() == {2}
+        scene.show_only(["R-1"])
+        assert np.array_equal(scene.render(), only_1)
+        assert not np.array_equal(only_1, both) and not np.array_equal(only_1, only_2)
+        scene.load("R-1")  # already loaded: nothing new
+        scene.show_only(["R-1", "R-2"])
+        assert hidden() == {"R-1": {False}, "R-2": {False}}
+    finally:
+        scene.close()
+
+
+def test_a_browser_that_falls_behind_loses_messages_counted_and_told():
+    """The WebSocket side never waits: a full queue drops the message, counts it, and
+    the browser's next delivered message says how many it missed."""
+    import asyncio
+    import json
+
+    from pipeline.live import websocket
+
+    async def run():
+        feed = websocket.WebSocketFeed(hello=dict, snapshot=dict)
+        slow, fast = websocket._Client(), websocket._Client()
+        feed.clients |= {slow, fast}
+        for seq in range(websocket.QUEUE + 5):
+            feed.publish({"seq": seq, "values": {}})
+            fast.queue.get_nowait()  # this one keeps up
+        assert slow.queue.qsize() == websocket.QUEUE and feed.dropped == 5 and fast.dropped == 0
+        first = json.loads(slow.queue.get_nowait())
+        assert first["seq"] == 0 and "dropped" not in first
+        feed.publish({"seq": 999, "values": {}})
+        while slow.queue.qsize() > 1:
+            slow.queue.get_nowait()
+        last = json.loads(slow.queue.get_nowait())
+        assert last == {"seq": 999, "values": {}, "dropped": 5} and slow.dropped == 0
+
+    asyncio.run(run())
