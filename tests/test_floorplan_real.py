@@ -376,13 +376,13 @@ def test_unitless_drawing_and_plan_units(tmp_path):
     assert fp.units == "cm ([plan] units; $INSUNITS says m)" and fp.placements[0].x == pytest.approx(0.1)
 
 
-def test_insertion_z_goes_through_grid_scale(tmp_path):
+def test_insertion_z_takes_the_drawing_unit_only(tmp_path):
     doc = new_doc(units=4)
     tagged(doc.modelspace().add_blockref("breaker", (10_000, 20_000, 62_500)), "Z-1")
-    fp, _ = read(doc, tmp_path, grid_scale=0.9996)
+    fp, _ = read(doc, tmp_path)
     (p,) = fp.placements
-    assert (p.x, p.y) == (10.0, 20.0)  # georef applies the scale to x and y
-    assert p.z == pytest.approx(62.5 * 0.9996, rel=1e-15)
+    assert (p.x, p.y) == (10.0, 20.0)  # georef applies grid_scale to x and y only
+    assert p.z == 62.5  # a height is the drawing unit's: grid_scale is horizontal
 
 
 def test_missing_tag_and_level_and_renamed_attributes(tmp_path):
@@ -459,8 +459,8 @@ def test_memo_keeps_handles_and_follows_the_options(tmp_path):
     again = read_floorplan_memo(tmp_path / "plan.dxf", {"breaker"}, {"L1", "L2"}, memo)
     assert again == first and all(isinstance(p.dxf_handles, tuple) for p in again.placements)
     scaled = read_floorplan_memo(tmp_path / "plan.dxf", {"breaker"}, {"L1", "L2"}, memo,
-                                 FloorplanOptions(grid_scale=2.0))
-    assert [p.z for p in scaled.placements] == [2 * p.z for p in first.placements]
+                                 FloorplanOptions(units="cm"))  # the options enter the memo's key
+    assert [p.z for p in scaled.placements] == pytest.approx([p.z / 100 for p in first.placements], rel=1e-15)
 
 
 def test_site_toml_floorplan_and_units(tmp_path):
@@ -476,7 +476,7 @@ def test_site_toml_floorplan_and_units(tmp_path):
     o = site.floorplan_options
     assert o.blocks == (("CB*", "breaker"), ("A$C1", "breaker"))
     assert (o.tag_attribute, o.level_attribute, o.state_attribute) == ("KKS", "LEVEL", "STATE")
-    assert (o.default_level, o.insert_scale, o.units, o.grid_scale) == ("L2", "apply", "ft", 0.9996)
+    assert (o.default_level, o.insert_scale, o.units) == ("L2", "apply", "ft")
     assert load_site(write_site(tmp_path / "plain")).floorplan_options == FloorplanOptions()
     for plan, floorplan, key in (("", '[floorplan]\ndefault_level = "L9"', "floorplan.default_level"),
                                  ('units = "furlong"', "", "plan.units"),

@@ -217,3 +217,25 @@ def test_the_worlds_sun_is_13_00_on_the_sites_clock(built):
     light = world.find("light[@name='sun']")
     assert float(light.findtext("intensity")) == pytest.approx(sun["intensity"]) and sun["intensity"] > 0.5
     assert 40.0 < sun["elevation_deg"] < 60.0  # a June (winter) afternoon at 12.7 S
+
+
+@pytest.mark.parametrize("units", [6, 4], ids=["m", "mm"])
+def test_heights_take_the_drawing_unit_and_not_grid_scale(tmp_path, units):
+    """grid_scale is the projection's horizontal factor: a site with s = 1.0005 and
+    plinths up to 40 m places every INSERT where pyproj puts it (z x (s - 1) = 20 mm
+    at 40 m was the error when z went through s)."""
+    from pipeline.scene import assemble
+    from pipeline.scene import placements as placing
+
+    sources = mini_sources.make(tmp_path / "sources", rotation_deg=23.0, units=units, grid_scale=1.0005)
+    high = [(t, a, lv, x, y, z, rot) for (t, a, lv, x, y, _, rot), z in
+            zip(mini_sources.PLACEMENTS, (0.0, 7.5, 40.0, 12.25, 32.0, 39.999))]
+    mini_sources.write_plan(sources / "floorplan" / "plan.dxf", high, units=units)
+    site, fp, georef = assemble._load(sources)
+    assert site.grid_scale == 1.0005
+    assert {p.tag: p.z for p in fp.placements} == pytest.approx({t: z for t, *_, z, _ in high}, rel=1e-12)
+    truth = independent_poses(sources)
+    for placed in placing.place(site, list(fp.placements), georef):
+        p, yaw = truth[placed.placement.tag]
+        assert np.abs(placed.pose[:3, 3] - p).max() < 1e-6, (placed.placement.tag, placed.pose[:3, 3], p)
+        assert angle_diff(math.degrees(placed.yaw), yaw) < 1e-6

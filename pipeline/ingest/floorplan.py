@@ -304,7 +304,7 @@ def _place(r: _Reading, insert, matrix, chain: tuple[str, ...], attrs: dict[str,
         level=level,
         x=float(x),
         y=float(y),
-        z=float(z) * r.options.grid_scale,
+        z=float(z),  # grid_scale is the projection's horizontal factor: a height takes the unit only
         heading_deg=heading,
         state=attrs.get("state") or None,
         handle=chain[-1],
