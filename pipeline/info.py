@@ -24,6 +24,7 @@ class InfoReport:
     per_asset: dict[str, int] = field(default_factory=dict)
     unused: list[str] = field(default_factory=list)
     ignored: list[tuple[str, int]] = field(default_factory=list)
+    absorbed: list[tuple[str, int]] = field(default_factory=list)  # mapped block -> INSERTs it absorbs
     warnings: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
 
@@ -90,6 +91,7 @@ def gather(sources: Path, build: Path = Path("build")) -> InfoReport:
     used = set(r.per_asset) | scenario_assets(sources)
     r.unused = sorted(set(assets) - used)
     r.ignored = list(fp.ignored)
+    r.absorbed = list(fp.absorbed)
     return r
 
 
@@ -112,6 +114,9 @@ def render(r: InfoReport, console: Console | None = None, errors: Console | None
         console.print(levels)
     if r.unused:
         console.print(f"assets no placement or scenario uses: {', '.join(r.unused)}")
+    if r.absorbed:
+        console.print(f"INSERTs absorbed by mapped blocks (their models stand for them): "
+                      f"{sum(n for _, n in r.absorbed)} in " + ", ".join(f"{k} x{n}" for k, n in r.absorbed))
     if r.ignored:
         console.print("ignored drawing entities: " + ", ".join(f"{k} x{n}" for k, n in r.ignored))
     from rich.markup import escape

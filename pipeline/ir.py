@@ -472,7 +472,9 @@ class FloorPlan:
 
     inserts: (block name, count) of every INSERT met, nested ones included;
     warnings: what the reader has to say about the drawing (blocks left out, no
-    platforms, no placements), one message each.
+    platforms, no placements, scaled INSERTs placed at scale 1), one message each;
+    absorbed: (mapped block name, count) of the INSERTs nested, at any depth, in the
+    placed INSERTs of each mapped block (its model stands for them).
     """
 
     path: str
@@ -482,3 +484,4 @@ class FloorPlan:
     ignored: tuple[tuple[str, int], ...] = ()
     inserts: tuple[tuple[str, int], ...] = ()
     warnings: tuple[str, ...] = ()
+    absorbed: tuple[tuple[str, int], ...] = ()
