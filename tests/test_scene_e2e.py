@@ -239,3 +239,106 @@ def test_heights_take_the_drawing_unit_and_not_grid_scale(tmp_path, units):
         p, yaw = truth[placed.placement.tag]
         assert np.abs(placed.pose[:3, 3] - p).max() < 1e-6, (placed.placement.tag, placed.pose[:3, 3], p)
         assert angle_diff(math.degrees(placed.yaw), yaw) < 1e-6
+
+
+SCALED = {"K-2": 2.0, "P-1": 0.5}  # INSERT scale factors of the scaled mini site
+
+
+@pytest.fixture(scope="module")
+def scaled_build(tmp_path_factory):
+    """The mini site with [floorplan] insert_scale = "apply" and two INSERTs drawn scaled."""
+    root = tmp_path_factory.mktemp("scaled")
+    sources = mini_sources.make(root / "sources")
+    with open(sources / "site.toml", "a") as f:
+        f.write('\n[floorplan]\ninsert_scale = "apply"\n')
+    doc = ezdxf.readfile(sources / "floorplan" / "plan.dxf")
+    for ins in doc.modelspace().query("INSERT"):
+        s = SCALED.get(ins.get_attrib_text("TAG"))
+        if s:
+            ins.dxf.xscale = ins.dxf.yscale = ins.dxf.zscale = s
+    doc.saveas(sources / "floorplan" / "plan.dxf")
+    out = root / "build"
+    report = build(sources, out, jobs=2, quiet=True)
+    assert not report.failed, report.failed
+    return sources, out
+
+
+def _scale_of(m: np.ndarray) -> float:
+    return float(np.cbrt(np.linalg.det(np.asarray(m, dtype=np.float64)[:3, :3])))
+
+
+def test_insert_scale_apply_reaches_every_output(scaled_build):
+    from pxr import Usd, UsdGeom
+
+    from pipeline import glb as container
+    from pipeline.export.names import lod_model_name
+    from pipeline.scene.world_sdf import GROUPED_SEPARATOR
+
+    sources, out = scaled_build
+    record = json.loads((out / "scene" / "placements.json").read_text())
+    assert {p["tag"]: p.get("scale", 1.0) for p in record["placements"] if p.get("scale")} == SCALED
+    truth = independent_poses(sources)
+
+    # USD: a scale op after the turn; the composed transform scales by the factor
+    stage = Usd.Stage.Open(str(out / "scene" / "mini.usda"))
+    for prim in stage.GetPrimAtPath("/Site/Placements").GetChildren():
+        tag = prim.GetCustomDataByKey("tag")
+        m = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()), dtype=np.float64).T
+        assert _scale_of(m) == pytest.approx(SCALED.get(tag, 1.0), rel=1e-12), tag
+        assert np.linalg.norm(m[:3, 3] - truth[tag][0]) < 1e-3
+
+    # glTF: every instance of a scaled placement carries its SCALE
+    doc, binary = container.read(out / "scene" / "mini.glb")
+    seen = set()
+    for node in doc["nodes"]:
+        inst = node.get("extensions", {}).get("EXT_mesh_gpu_instancing")
+        if inst and "tags" in node.get("extras", {}):
+            scales = _acc(doc, binary, inst["attributes"]["SCALE"])
+            for tag, s in zip(node["extras"]["tags"], scales):
+                assert s == pytest.approx([SCALED.get(tag, 1.0)] * 3, rel=1e-6), (tag, s)
+                seen.add(tag)
+    assert set(SCALED) <= seen
+
+    # SDF: a scaled placement is a model of its own; its elements' offsets and meshes scaled
+    world = etree.parse(str(out / "scene" / "mini.sdf"), SAFE_XML).getroot().find("world")
+    for tag, s in SCALED.items():
+        model = world.find(f"model[@name='{tag}']")
+        assert model is not None and model.find(f"frame[@name='{tag}']") is not None
+        variant = next(m.get("name") for m in world.findall("model") if m.find(f"frame[@name='{tag}']") is not None)
+        assert variant == tag
+        items = model.findall("link/visual") + model.findall("link/collision")
+        assert items
+        asset = next(p["asset"] for p in record["placements"] if p["tag"] == tag)
+        lod = next(p["lod"] for p in record["placements"] if p["tag"] == tag)
+        source = etree.parse(str(out / "models" / lod_model_name(asset, lod) / "model.sdf"), SAFE_XML)
+        for item in items:
+            name = item.get("name").split(GROUPED_SEPARATOR, 1)[1]
+            original = source.find(f".//{item.tag}[@name='{name}']")
+            want = [float(v) * s for v in (original.findtext("pose") or "0 0 0").split()[:3]]
+            got = [float(v) for v in item.findtext("pose").split()[:3]]
+            assert got == pytest.approx(want, abs=1e-9)
+            mesh_scale = item.find("geometry/mesh/scale")
+            if item.find("geometry/mesh") is not None:
+                assert [float(v) for v in mesh_scale.text.split()] == pytest.approx([s] * 3)
+            for size in item.findall("geometry/box/size"):
+                orig = [float(v) * s for v in original.findtext("geometry/box/size").split()]
+                assert [float(v) for v in size.text.split()] == pytest.approx(orig)
+
+    # tiles: the instances of a scaled placement at its scale
+    found = {}
+    for content in (out / "tiles" / "content").glob("*.glb"):
+        tdoc, tbin = container.read(content)
+        for node in tdoc["nodes"]:
+            inst = node.get("extensions", {}).get("EXT_mesh_gpu_instancing")
+            if inst:
+                for tag, sc in zip(node["extras"]["tags"], _acc(tdoc, tbin, inst["attributes"]["SCALE"])):
+                    found.setdefault(tag, set()).add(round(float(sc[0]), 5))
+    assert {t: v for t, v in found.items() if v != {1.0}} == {t: {s} for t, s in SCALED.items()}
+
+
+def test_scaled_scene_passes_the_validators(scaled_build):
+    _, out = scaled_build
+    assert external.ign_sdf(out / "scene" / "mini.sdf", [out / "models"]).status == "passed"
+    assert external.usd_validation(out / "scene" / "mini.usda").status == "passed"
+    [r] = external.gltf_validator([out / "scene" / "mini.glb"])
+    assert r.status == "passed", r.messages

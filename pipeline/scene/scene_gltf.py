@@ -21,6 +21,7 @@ import numpy as np
 from .. import glb
 from ..export.names import gltf_file
 from ..geometry.transform import quaternion_from_matrix
+from . import placements as placing
 from .placements import Placed
 
 
@@ -168,7 +169,7 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
     visuals = []
     for (asset_id, lod), members in sorted(groups.items()):
         doc = sources[asset_id][0]
-        poses = glb.to_y_up(np.array([pl.pose for pl in members]))  # (k, 4, 4)
+        poses = glb.to_y_up(np.array([placing.scaled_pose(pl) for pl in members]))  # (k, 4, 4)
         for ni, local in glb.visual_nodes(doc):
             chain = glb.lod_meshes(doc, ni)[lod:] or glb.lod_meshes(doc, ni)[-1:]
             morphs = any("targets" in p for p in doc["meshes"][chain[0]]["primitives"])

@@ -10,12 +10,16 @@ and groups the rest:
 
 - an <include> of the placement's LOD variant for an articulated asset (its joints
   move) or one a state binding drives (the runtime swaps the include's URI);
+- a placement drawn scaled ([floorplan] insert_scale = "apply") cannot be an include
+  (SDF has no scale on one): it is a grouped model of its own, named by its TAG;
 - every other placement of a package variant goes into one static model named after
   the variant, with one link: the placement is a <frame> named by its TAG at its pose
   (the same pose an include would have), and the variant's visuals and collisions,
   named `<TAG>__<name>` (`<TAG>__<link>__<name>` for a model of several links, whose
   joints stay at rest, as in any static model), are posed relative to it: a copy of
   the variant's model.sdf content, meshes still model://<asset>/meshes/....
+  A scaled placement's elements are posed at the scaled offsets and their geometry
+  scaled (mesh <scale>, box size, cylinder and sphere dimensions).
 """
 
 from __future__ import annotations
@@ -89,7 +93,9 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     groups: dict[str, list[Placed]] = {}
     for pl in sorted(placed, key=lambda p: p.placement.tag):
         variant = lod_model_name(pl.placement.asset_id, pl.lod)
-        if pl.placement.asset_id in own_model:
+        if pl.placement.scale != 1.0:
+            world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag))
+        elif pl.placement.asset_id in own_model:
             inc = etree.SubElement(world, "include")
             _text(inc, "uri", f"model://{variant}")
             _text(inc, "name", pl.placement.tag)
@@ -115,12 +121,31 @@ def _pose_text(matrix: np.ndarray) -> str:
     return " ".join(fmt(v) for v in (*xyz.tolist(), *rpy.tolist()))
 
 
-def grouped_model(variant: str, model_sdf: Path, members: list[Placed]) -> etree._Element:
-    """One static model with one link: per member placement a frame named by its TAG at
-    its pose, and the variant's visuals and collisions posed relative to that frame."""
+def _scale_geometry(item, s: float) -> None:
+    """An SDF visual's or collision's geometry drawn `s` times its size (uniform)."""
+    geometry = item.find("geometry")
+    if geometry is None:
+        return
+    mesh = geometry.find("mesh")
+    if mesh is not None:
+        scale = mesh.find("scale")
+        old = [float(v) for v in scale.text.split()] if scale is not None else [1.0, 1.0, 1.0]
+        if scale is None:
+            scale = etree.SubElement(mesh, "scale")
+        scale.text = " ".join(fmt(v * s) for v in old)
+    for path in ("box/size", "cylinder/radius", "cylinder/length", "sphere/radius", "capsule/radius",
+                 "capsule/length", "ellipsoid/radii"):
+        for el in geometry.findall(path):
+            el.text = " ".join(fmt(float(v) * s) for v in el.text.split())
+
+
+def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None) -> etree._Element:
+    """One static model (named `name`, default the variant) with one link: per member
+    placement a frame named by its TAG at its pose, and the variant's visuals and
+    collisions posed relative to that frame, at the placement's scale."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
     source_links = source.findall("link")
-    model = etree.Element("model", name=variant)
+    model = etree.Element("model", name=name or variant)
     _text(model, "static", "true")
     link = etree.SubElement(model, "link", name=GROUPED_LINK)
     for pl in members:
@@ -143,6 +168,10 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed]) -> etree
                         pose = etree.Element("pose")
                         item.insert(0, pose)
                     pose.set("relative_to", tag)
-                    pose.text = _pose_text(_pose_of(source_link) @ _pose_of(el))
+                    offset = _pose_of(source_link) @ _pose_of(el)
+                    if pl.placement.scale != 1.0:
+                        offset[:3, 3] *= pl.placement.scale
+                        _scale_geometry(item, pl.placement.scale)
+                    pose.text = _pose_text(offset)
                     link.append(item)
     return model

@@ -277,7 +277,9 @@ def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], 
     placements = record["placements"]
     assets = [p["asset"] for p in placements]
     errors = {a: levels_of(manifests[a]) for a in sorted(set(assets))}
-    poses = np.array([yaw_matrix(p["yaw_rad"], p["enu"]) for p in placements]).reshape(-1, 4, 4)
+    # placements.json records "scale" where insert_scale = "apply" drew one (else 1)
+    poses = np.array([yaw_matrix(p["yaw_rad"], p["enu"]) @ np.diag([p.get("scale", 1.0)] * 3 + [1.0])
+                      for p in placements]).reshape(-1, 4, 4)
     packs = packs_of(out, models, {a: manifests[a] for a in errors}, memo)
 
     def shown(a: str, level: int) -> int:
