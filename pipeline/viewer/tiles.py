@@ -37,7 +37,7 @@ from .. import glb
 from ..export.names import gltf_file
 from ..files import atomic_write
 from ..scene.placements import yaw_matrix
-from .packs import Pack, make_pack, texture_refs
+from .packs import Pack, make_pack
 
 TILESET = "tileset.json"
 MIN_CELL_M = 8.0  # no cell smaller: below it, a tile holds about one placement
@@ -191,7 +191,7 @@ def _add_pack(doc: dict, pack: Pack, variants: list[str], used: set[str]) -> int
     for mat in pack.materials:
         mat = json.loads(json.dumps(mat))
         refs: list[dict] = []
-        texture_refs(mat, refs)
+        glb.texture_refs(mat, refs)
         for ref in refs:
             ref["index"] += textures
         used.update(mat.get("extensions", {}))
