@@ -180,29 +180,49 @@ def test_gazebo_reads_the_world_meshes_as_written(site):
     assert gazebo.mesh_findings([Path(p) for p in paths], seen["meshes"], str) == []
 
 
+def _world_points(uses: list[dict], place: np.ndarray) -> np.ndarray:
+    """(n, 3) every vertex of the visual meshes Gazebo placed (`uses`: the probe's rows,
+    with model_from_mesh), read from the files with pycollada, in the world frame."""
+    import collada
+
+    points = []
+    for use in uses:
+        m = place @ np.array(use["model_from_mesh"]).reshape(4, 4)
+        for geometry in collada.Collada(use["path"]).scene.objects("geometry"):
+            for prim in geometry.primitives():
+                v = np.asarray(prim.vertex, dtype=np.float64)
+                points.append(v @ m[:3, :3].T + m[:3, 3])
+    return np.concatenate(points)
+
+
 def test_a_grouped_placement_is_where_its_include_would_be(site):
-    """The visual bounds of a placement drawn in a grouped model equal those of its
-    variant placed alone at the frame's pose (as an include would place it)."""
+    """What a placement drawn in a grouped model shows (its one whole-model visual)
+    is what its variant placed alone at the frame's pose (as an include would place
+    it) shows with all its visuals: the same vertices, each where Gazebo puts it."""
     out, world, seen = site
     root = etree.parse(str(world), SAFE).getroot()
-    model = root.find("world/model")
-    frame = model.find("frame")
-    tag, pose = frame.get("name"), [float(v) for v in frame.findtext("pose").split()]
-    alone = out / "alone.sdf"
-    alone.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>model://{model.get("name")}</uri>'
-                     f'<name>{tag}</name><pose>{" ".join(map(str, pose))}</pose></include></world></sdf>\n')
-    single = gazebo.probe_world(alone, [out / "models"])["models"][0]
-    place = np.array(single["world_from_model"]).reshape(4, 4)
-    grouped = next(m for m in seen["models"] if m["name"] == model.get("name"))
-    mine = [u for u in grouped["meshes"] if u["kind"] == "visual" and any(
-        u["uri"] == v.findtext("geometry/mesh/uri") and v.get("name").startswith(tag + "__") for v in model.iter("visual"))]
-    assert mine
-    for use in single["meshes"]:
-        if use["kind"] != "visual":
-            continue
-        world_from_mesh = place @ np.array(use["model_from_mesh"]).reshape(4, 4)
-        assert any(np.allclose(np.array(u["model_from_mesh"]).reshape(4, 4), world_from_mesh, atol=1e-9)
-                   for u in mine if u["uri"] == use["uri"])
+    for model in root.findall("world/model"):
+        frame = model.find("frame")
+        tag, pose = frame.get("name"), [float(v) for v in frame.findtext("pose").split()]
+        alone = out / "alone.sdf"
+        alone.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>model://{model.get("name")}</uri>'
+                         f'<name>{tag}</name><pose>{" ".join(map(str, pose))}</pose></include></world></sdf>\n')
+        single = gazebo.probe_world(alone, [out / "models"])["models"][0]
+        theirs = _world_points([u for u in single["meshes"] if u["kind"] == "visual"],
+                               np.array(single["world_from_model"]).reshape(4, 4))
+        grouped = next(m for m in seen["models"] if m["name"] == model.get("name"))
+        mine_names = {v.findtext("geometry/mesh/uri") for v in model.iter("visual") if v.get("name") == f"{tag}__whole"}
+        assert len(mine_names) == 1 and "whole__lod" in next(iter(mine_names))
+        # its row: the whole model's visual sits at its frame (the pose relative to it is 0)
+        mine = [u for u in grouped["meshes"] if u["kind"] == "visual" and u["uri"] in mine_names and np.allclose(
+            np.array(u["model_from_mesh"]).reshape(4, 4)[:3, 3], pose[:3], atol=1e-9)]
+        assert len(mine) == 1
+        ours = _world_points(mine, np.array(grouped["world_from_model"]).reshape(4, 4))
+        assert len(ours) == len(theirs)
+        np.testing.assert_allclose(np.sort(ours, axis=0), np.sort(theirs, axis=0), atol=1e-6)
+        # one visual and one collision a placement
+        assert len([v for v in model.iter("visual") if v.find("pose").get("relative_to") == tag]) == 1
+        assert len([c for c in model.iter("collision") if c.find("pose").get("relative_to") == tag]) <= 1
 
 
 def test_dartsim_builds_and_steps_the_world(site):

@@ -271,7 +271,6 @@ def test_insert_scale_apply_reaches_every_output(scaled_build):
     from pxr import Usd, UsdGeom
 
     from pipeline import glb as container
-    from pipeline.export.names import lod_model_name
     from pipeline.scene.world_sdf import GROUPED_SEPARATOR
 
     sources, out = scaled_build
@@ -299,30 +298,21 @@ def test_insert_scale_apply_reaches_every_output(scaled_build):
                 seen.add(tag)
     assert set(SCALED) <= seen
 
-    # SDF: a scaled placement is a model of its own; its elements' offsets and meshes scaled
+    # SDF: a scaled placement is a model of its own; its whole-model visual and its
+    # collision meshes drawn at its scale, at its frame
     world = etree.parse(str(out / "scene" / "mini.sdf"), SAFE_XML).getroot().find("world")
     for tag, s in SCALED.items():
         model = world.find(f"model[@name='{tag}']")
         assert model is not None and model.find(f"frame[@name='{tag}']") is not None
-        variant = next(m.get("name") for m in world.findall("model") if m.find(f"frame[@name='{tag}']") is not None)
-        assert variant == tag
         items = model.findall("link/visual") + model.findall("link/collision")
-        assert items
-        asset = next(p["asset"] for p in record["placements"] if p["tag"] == tag)
-        lod = next(p["lod"] for p in record["placements"] if p["tag"] == tag)
-        source = etree.parse(str(out / "models" / lod_model_name(asset, lod) / "model.sdf"), SAFE_XML)
+        assert sorted(i.get("name") for i in items) == sorted(f"{tag}{GROUPED_SEPARATOR}{k}" for k in ("whole", "collision"))
         for item in items:
-            name = item.get("name").split(GROUPED_SEPARATOR, 1)[1]
-            original = source.find(f".//{item.tag}[@name='{name}']")
-            want = [float(v) * s for v in (original.findtext("pose") or "0 0 0").split()[:3]]
-            got = [float(v) for v in item.findtext("pose").split()[:3]]
-            assert got == pytest.approx(want, abs=1e-9)
-            mesh_scale = item.find("geometry/mesh/scale")
-            if item.find("geometry/mesh") is not None:
-                assert [float(v) for v in mesh_scale.text.split()] == pytest.approx([s] * 3)
-            for size in item.findall("geometry/box/size"):
-                orig = [float(v) * s for v in original.findtext("geometry/box/size").split()]
-                assert [float(v) for v in size.text.split()] == pytest.approx(orig)
+            assert item.find("pose").get("relative_to") == tag
+            assert [float(v) for v in item.findtext("pose").split()] == [0.0] * 6
+            assert [float(v) for v in item.findtext("geometry/mesh/scale").split()] == pytest.approx([s] * 3)
+    for item in world.iter("visual", "collision"):  # nobody else is scaled
+        if item.find("pose") is not None and item.find("pose").get("relative_to") not in SCALED:
+            assert item.find("geometry/mesh/scale") is None
 
     # tiles: the instances of a scaled placement at its scale
     found = {}

@@ -14,12 +14,15 @@ and groups the rest:
   (SDF has no scale on one): it is a grouped model of its own, named by its TAG;
 - every other placement of a package variant goes into one static model named after
   the variant, with one link: the placement is a <frame> named by its TAG at its pose
-  (the same pose an include would have), and the variant's visuals and collisions,
-  named `<TAG>__<name>` (`<TAG>__<link>__<name>` for a model of several links, whose
-  joints stay at rest, as in any static model), are posed relative to it: a copy of
-  the variant's model.sdf content, meshes still model://<asset>/meshes/....
-  A scaled placement's elements are posed at the scaled offsets and their geometry
-  scaled (mesh <scale>, box size, cylinder and sphere dimensions).
+  (the same pose an include would have) and draws, posed relative to it, one <visual>
+  `<TAG>__whole` of the package's whole model at its LOD (every visual of every link at
+  rest, one submesh per material) and one <collision> `<TAG>__collision` of all its
+  collision meshes: sdformat spends about 160 kB on each <visual> or <collision>
+  (tools/gzprobe), and a site's thousands of placements fit only with one of each.
+  A package without whole meshes (written before them) gets a copy of each of the
+  variant's visuals and collisions, named `<TAG>__<name>` (`<TAG>__<link>__<name>`
+  for a model of several links). A scaled placement's elements are posed at the
+  scaled offsets and their geometry scaled (mesh <scale>, box, cylinder, sphere).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import numpy as np
 from lxml import etree
 
 from .. import safe_xml
-from ..export.names import fmt, lod_model_name
+from ..export.names import WHOLE_COLLISION_FILE, fmt, lod_model_name, whole_mesh_file
 from ..geometry.transform import matrix_to_xyz_rpy, xyz_rpy_to_matrix
 from .placements import Placed
 
@@ -141,19 +144,28 @@ def _scale_geometry(item, s: float) -> None:
 
 def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None) -> etree._Element:
     """One static model (named `name`, default the variant) with one link: per member
-    placement a frame named by its TAG at its pose, and the variant's visuals and
-    collisions posed relative to that frame, at the placement's scale."""
+    placement a frame named by its TAG at its pose, and what it draws posed relative to
+    that frame, at the placement's scale: the package's whole model at the variant's
+    LOD and all its collision meshes, one <visual> and one <collision> (`<TAG>__whole`,
+    `<TAG>__collision`), when the package has them (export.collada._write_whole); else
+    a copy of each of the variant's visuals and collisions."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
     source_links = source.findall("link")
     model = etree.Element("model", name=name or variant)
     _text(model, "static", "true")
     link = etree.SubElement(model, "link", name=GROUPED_LINK)
+    models = Path(model_sdf).parent.parent
     for pl in members:
         tag = pl.placement.tag
         x, y, z = pl.pose[:3, 3]
         frame = etree.Element("frame", name=tag, attached_to=GROUPED_LINK)
         _text(frame, "pose", " ".join(fmt(v) for v in (x, y, z, 0.0, 0.0, pl.yaw)))
         model.append(frame)
+        whole = _whole_elements(models, pl, any(sl.find("collision") is not None for sl in source_links))
+        if whole is not None:
+            for item in whole:
+                link.append(item)
+            continue
         for source_link in source_links:
             # names are unique within a link: with several links, the link's name too
             prefix = tag + GROUPED_SEPARATOR
@@ -175,3 +187,27 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
                     pose.text = _pose_text(offset)
                     link.append(item)
     return model
+
+
+def _whole_elements(models: Path, pl: Placed, collides: bool) -> list[etree._Element] | None:
+    """A placement's <visual> of its package's whole model at its LOD and <collision> of
+    all its collision meshes (when the variant has any), or None when the package has
+    no whole model at that LOD. Their materials are the meshes' own (COLLADA Phong)."""
+    asset = pl.placement.asset_id
+    visual_file = whole_mesh_file(pl.lod)
+    if not (models / asset / visual_file).is_file():
+        return None
+    items = [("visual", f"{pl.placement.tag}{GROUPED_SEPARATOR}whole", visual_file)]
+    if collides:
+        if not (models / asset / WHOLE_COLLISION_FILE).is_file():
+            return None
+        items.append(("collision", f"{pl.placement.tag}{GROUPED_SEPARATOR}collision", WHOLE_COLLISION_FILE))
+    out = []
+    for kind, name, rel in items:
+        item = etree.Element(kind, name=name)
+        _text(item, "pose", "0 0 0 0 0 0").set("relative_to", pl.placement.tag)
+        _text(etree.SubElement(etree.SubElement(item, "geometry"), "mesh"), "uri", f"model://{asset}/{rel}")
+        if pl.placement.scale != 1.0:
+            _scale_geometry(item, pl.placement.scale)
+        out.append(item)
+    return out
