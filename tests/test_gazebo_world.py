@@ -230,3 +230,23 @@ def test_dartsim_builds_and_steps_the_world(site):
     physics = seen["physics"]
     assert physics["ok"] and physics["failed_shapes"] == 0 and physics["collision_detector"] == "bullet"
     assert physics["mesh_shapes"] + physics["primitive_shapes"] > 0 and physics["steps"] == 200
+
+
+def test_devices_piled_on_one_point_collide_once(site):
+    """Placements of one asset at one pose (real drawings pile blocks on one insertion
+    point) are each drawn, but their collision is in the world once: dartsim would
+    test every copy against every other at each step."""
+    from pipeline.scene.placements import Placed, yaw_matrix
+    from pipeline.scene.world_sdf import grouped_model
+
+    out, _, _ = site
+    spot = [Placed(ir.Placement(f"K-{i}", "kiosk", "L1", 0.0, 0.0), yaw_matrix(0.5, (3.0, 4.0, 1.0)), 0.5)
+            for i in range(5)]
+    apart = Placed(ir.Placement("K-9", "kiosk", "L1", 9.0, 0.0), yaw_matrix(0.5, (12.0, 4.0, 1.0)), 0.5)
+    turned = Placed(ir.Placement("K-8", "kiosk", "L1", 0.0, 0.0), yaw_matrix(0.7, (3.0, 4.0, 1.0)), 0.7)
+    seen: set = set()
+    model = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", [*spot, apart, turned], collisions=seen)
+    assert len(model.findall("link/visual")) == 7
+    assert sorted(c.find("pose").get("relative_to") for c in model.findall("link/collision")) == ["K-0", "K-8", "K-9"]
+    again = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", spot[:1], name="K-0b", collisions=seen)
+    assert again.findall("link/collision") == []  # shared by every model of one world

@@ -94,10 +94,12 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     _text(inc, "static", "true")
 
     groups: dict[str, list[Placed]] = {}
+    collisions: set = set()  # (asset, scale, pose) of the whole collisions already in the world
     for pl in sorted(placed, key=lambda p: p.placement.tag):
         variant = lod_model_name(pl.placement.asset_id, pl.lod)
         if pl.placement.scale != 1.0:
-            world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag))
+            world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag,
+                                       collisions=collisions))
         elif pl.placement.asset_id in own_model:
             inc = etree.SubElement(world, "include")
             _text(inc, "uri", f"model://{variant}")
@@ -108,7 +110,7 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         else:
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
-        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members))
+        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, collisions=collisions))
     data = etree.tostring(sdf, pretty_print=True, xml_declaration=True, encoding="UTF-8")
     Path(path).write_bytes(data)
 
@@ -142,13 +144,18 @@ def _scale_geometry(item, s: float) -> None:
             el.text = " ".join(fmt(float(v) * s) for v in el.text.split())
 
 
-def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None) -> etree._Element:
+def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None,
+                  collisions: set | None = None) -> etree._Element:
     """One static model (named `name`, default the variant) with one link: per member
     placement a frame named by its TAG at its pose, and what it draws posed relative to
     that frame, at the placement's scale: the package's whole model at the variant's
     LOD and all its collision meshes, one <visual> and one <collision> (`<TAG>__whole`,
     `<TAG>__collision`), when the package has them (export.collada._write_whole); else
-    a copy of each of the variant's visuals and collisions."""
+    a copy of each of the variant's visuals and collisions. `collisions`: the whole
+    collisions already in the world (asset, scale, pose to 1 um and 1 nrad), shared by
+    every call for one world: a placement that would repeat one exactly (devices piled
+    on one insertion point) adds no second, which physics would only test against the
+    first at every step."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
     source_links = source.findall("link")
     model = etree.Element("model", name=name or variant)
@@ -161,7 +168,12 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
         frame = etree.Element("frame", name=tag, attached_to=GROUPED_LINK)
         _text(frame, "pose", " ".join(fmt(v) for v in (x, y, z, 0.0, 0.0, pl.yaw)))
         model.append(frame)
-        whole = _whole_elements(models, pl, any(sl.find("collision") is not None for sl in source_links))
+        collides = any(sl.find("collision") is not None for sl in source_links)
+        if collides and collisions is not None:
+            key = (pl.placement.asset_id, pl.placement.scale, *np.round(pl.pose[:3, 3], 6).tolist(), round(pl.yaw, 9))
+            collides = key not in collisions
+            collisions.add(key)
+        whole = _whole_elements(models, pl, collides)
         if whole is not None:
             for item in whole:
                 link.append(item)
