@@ -212,6 +212,16 @@ def test_a_grouped_placement_is_where_its_include_would_be(site):
                                np.array(single["world_from_model"]).reshape(4, 4))
         grouped = next(m for m in seen["models"] if m["name"] == model.get("name"))
         mine_names = {v.findtext("geometry/mesh/uri") for v in model.iter("visual") if v.get("name") == f"{tag}__whole"}
+        if not mine_names:  # the finest level of a model with coarser ones: each visual as in its variant
+            assert model.get("name") == model.get("name").split("__lod")[0]
+            mine = [u for u in grouped["meshes"] if u["kind"] == "visual"]
+            for use in single["meshes"]:
+                if use["kind"] == "visual":
+                    world_from_mesh = np.array(single["world_from_model"]).reshape(4, 4) @ np.array(
+                        use["model_from_mesh"]).reshape(4, 4)
+                    assert any(np.allclose(np.array(u["model_from_mesh"]).reshape(4, 4), world_from_mesh, atol=1e-9)
+                               for u in mine if u["uri"] == use["uri"])
+            continue
         assert len(mine_names) == 1 and "whole__lod" in next(iter(mine_names))
         # its row: the whole model's visual sits at its frame (the pose relative to it is 0)
         mine = [u for u in grouped["meshes"] if u["kind"] == "visual" and u["uri"] in mine_names and np.allclose(
@@ -223,6 +233,7 @@ def test_a_grouped_placement_is_where_its_include_would_be(site):
         # one visual and one collision a placement
         assert len([v for v in model.iter("visual") if v.find("pose").get("relative_to") == tag]) == 1
         assert len([c for c in model.iter("collision") if c.find("pose").get("relative_to") == tag]) <= 1
+    assert any(m.find("link/visual").get("name").endswith("__whole") for m in root.findall("world/model"))
 
 
 def test_dartsim_builds_and_steps_the_world(site):
@@ -235,7 +246,8 @@ def test_dartsim_builds_and_steps_the_world(site):
 def test_devices_piled_on_one_point_collide_once(site):
     """Placements of one asset at one pose (real drawings pile blocks on one insertion
     point) are each drawn, but their collision is in the world once: dartsim would
-    test every copy against every other at each step."""
+    test every copy against every other at each step. Near (LOD 0: each visual and
+    collision as in the package) and far (the whole model)."""
     from pipeline.scene.placements import Placed, yaw_matrix
     from pipeline.scene.world_sdf import grouped_model
 
@@ -250,3 +262,8 @@ def test_devices_piled_on_one_point_collide_once(site):
     assert sorted(c.find("pose").get("relative_to") for c in model.findall("link/collision")) == ["K-0", "K-8", "K-9"]
     again = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", spot[:1], name="K-0b", collisions=seen)
     assert again.findall("link/collision") == []  # shared by every model of one world
+    # the same at a coarse level, where each placement draws the whole model
+    far = [Placed(p.placement, p.pose, p.yaw, lod=1) for p in (*spot, apart)]
+    model = grouped_model("kiosk__lod1", out / "models" / "kiosk__lod1" / "model.sdf", far, collisions=set())
+    assert [v.get("name") for v in model.findall("link/visual")] == [f"{p.placement.tag}__whole" for p in far]
+    assert [c.get("name") for c in model.findall("link/collision")] == ["K-0__collision", "K-9__collision"]

@@ -84,13 +84,16 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
 
 
 def _write_whole(asset: ir.Asset, folder: Path, memo) -> list[str]:
-    """The whole model at rest, per LOD (names.whole_mesh_file), and all its collision
+    """The whole model at rest, per coarse LOD (names.whole_mesh_file), and all its collision
     meshes in one (names.WHOLE_COLLISION_FILE), in the model frame. A grouped placement
     of the Gazebo world draws each as one element: sdformat spends about 160 kB of
     memory on every <visual> or <collision> whatever it holds (tools/gzprobe), so a site
     of thousands of placements fits only with one of each a placement."""
     written = []
-    for level in range(asset.lod_count):
+    # not the finest level of an asset that has coarser ones: the few placements near
+    # the inspection points keep each visual with its own SDF material (its PBR terms),
+    # and the largest of the files is not written twice
+    for level in range(1 if asset.lod_count > 1 else 0, asset.lod_count):
         by_material: dict[str, list] = {}
         for link in asset.links:
             for visual in variant_visuals(asset, link, level):

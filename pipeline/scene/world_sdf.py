@@ -183,7 +183,7 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
             prefix = tag + GROUPED_SEPARATOR
             if len(source_links) > 1:
                 prefix += source_link.get("name") + GROUPED_SEPARATOR
-            for kind in ("visual", "collision"):
+            for kind in ("visual", "collision") if collides else ("visual",):
                 for el in source_link.findall(kind):
                     item = copy.deepcopy(el)
                     item.set("name", prefix + el.get("name"))
