@@ -158,11 +158,10 @@ class InspectionPoint:
 
 @dataclass(frozen=True)
 class FloorplanOptions:
-    """How the floor plan is read: [floorplan] and [plan] units, grid_scale of site.toml.
+    """How the floor plan is read: [floorplan] and [plan] units of site.toml.
 
     blocks: (block name or fnmatch pattern, asset id) pairs in the order written.
     units: the drawing's length unit when site.toml names one (else $INSUNITS).
-    grid_scale: insertion z goes through the plan scale as x and y do.
     """
 
     blocks: tuple[tuple[str, str], ...] = ()
@@ -172,7 +171,6 @@ class FloorplanOptions:
     default_level: str | None = None
     insert_scale: str = "ignore"
     units: str | None = None
-    grid_scale: float = 1.0
     max_placements: int = 100_000  # more from the drawing's INSERTs is refused before expanding them
     conductor_layers: tuple[str, ...] = ()  # upper case: their LINEs are conductors ([wiring] layers), not ignored
 
@@ -336,7 +334,6 @@ def _floorplan_options(data: dict, path: Path) -> FloorplanOptions:
         default_level=fp.get("default_level"),
         insert_scale=fp["insert_scale"],
         units=data["plan"].get("units"),
-        grid_scale=float(data["plan"]["grid_scale"]),
         max_placements=int(fp["max_placements"]),
         conductor_layers=tuple(sorted({lay["layer"].upper() for lay in data.get("wiring", {}).get("layers", [])})),
     )

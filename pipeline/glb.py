@@ -262,6 +262,20 @@ def from_gltf_rotation(q) -> np.ndarray:
 
 # ---------------------------------------------------------------- nodes
 
+def texture_refs(node, out: list[dict]) -> None:
+    """Every {"index": ...} texture reference inside a material (its textureInfos, those
+    of its extensions included), in document order, appended to `out`."""
+    if isinstance(node, dict):
+        for k in sorted(node):
+            v = node[k]
+            if k.endswith("Texture") and isinstance(v, dict) and "index" in v:
+                out.append(v)
+            texture_refs(v, out)
+    elif isinstance(node, list):
+        for v in node:
+            texture_refs(v, out)
+
+
 def instance_transforms(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(translations (k, 3), rotations (k, 4) glTF's x, y, z, w, scales (k, 3)) float32
     of `matrices: (k, 4, 4)`, for EXT_mesh_gpu_instancing: computed for every

@@ -24,6 +24,7 @@ class InfoReport:
     per_asset: dict[str, int] = field(default_factory=dict)
     unused: list[str] = field(default_factory=list)
     ignored: list[tuple[str, int]] = field(default_factory=list)
+    absorbed: list[tuple[str, int]] = field(default_factory=list)  # mapped block -> INSERTs it absorbs
     warnings: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
     conductors: dict[str, int] = field(default_factory=dict)  # spans in site.toml, lines in the plan, types
@@ -103,6 +104,7 @@ def gather(sources: Path, build: Path = Path("build"), progress=None) -> InfoRep
     r.unused = sorted(set(assets) - used)
     r.ignored = list(fp.ignored)
     _conductors(r, site, fp, assets)
+    r.absorbed = list(fp.absorbed)
     return r
 
 
@@ -151,6 +153,9 @@ def render(r: InfoReport, console: Console | None = None, errors: Console | None
         console.print("conductors: " + ", ".join(f"{k} {n}" for k, n in r.conductors.items()))
     if r.unused:
         console.print(f"assets no placement or scenario uses: {', '.join(r.unused)}")
+    if r.absorbed:
+        console.print(f"INSERTs absorbed by mapped blocks (their models stand for them): "
+                      f"{sum(n for _, n in r.absorbed)} in " + ", ".join(f"{k} x{n}" for k, n in r.absorbed))
     if r.ignored:
         console.print("ignored drawing entities: " + ", ".join(f"{k} x{n}" for k, n in r.ignored))
     from rich.markup import escape

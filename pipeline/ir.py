@@ -434,8 +434,8 @@ class Placement:
     """One placed INSERT of the floor plan (at the end of a chain of nested INSERTs).
 
     position: (x, y) drawing metres in the plant grid, where the INSERT chain takes the
-    block's origin; z: height above its level, metres (through the plan's grid_scale,
-    as x and y go through it in georef).
+    block's origin; z: height above its level, metres (the drawing's unit only:
+    grid_scale is the projection's horizontal factor and applies to x and y in georef).
     heading_deg: direction of the block's x axis, counter-clockwise in the plant grid.
     handle: the placed INSERT's; dxf_handles: the chain from the modelspace INSERT to it.
     scale: the model's scale factor (1 unless [floorplan] insert_scale = "apply").
@@ -472,7 +472,9 @@ class FloorPlan:
 
     inserts: (block name, count) of every INSERT met, nested ones included;
     warnings: what the reader has to say about the drawing (blocks left out, no
-    platforms, no placements), one message each.
+    platforms, no placements, scaled INSERTs placed at scale 1), one message each;
+    absorbed: (mapped block name, count) of the INSERTs nested, at any depth, in the
+    placed INSERTs of each mapped block (its model stands for them).
     """
 
     path: str
@@ -485,3 +487,4 @@ class FloorPlan:
     # LINEs and LWPOLYLINEs of the conductor layers: (handle, layer upper case,
     # plan vertices in metres ((x, y), ...)), in drawing order
     conductor_lines: tuple[tuple[str, str, tuple[tuple[float, float], ...]], ...] = ()
+    absorbed: tuple[tuple[str, int], ...] = ()

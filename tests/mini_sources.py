@@ -23,7 +23,7 @@ timezone = "America/Bahia"
 crs = "EPSG:31984"
 grid_origin = [{e0}, {n0}]
 grid_rotation_deg = {rot}
-grid_scale = 1.0
+grid_scale = {scale!r}
 [[levels]]
 name = "L1"
 elevation = 48.0
@@ -90,10 +90,11 @@ def write_plan(path: Path, placements=PLACEMENTS, units: int = 6, extra=None) ->
     doc.saveas(path)
 
 
-def make(root: Path, rotation_deg: float = 23.0, units: int = 6, e0: float = 561234.5, n0: float = 8595432.25) -> Path:
+def make(root: Path, rotation_deg: float = 23.0, units: int = 6, e0: float = 561234.5, n0: float = 8595432.25,
+         grid_scale: float = 1.0) -> Path:
     root = Path(root)
     (root / "floorplan").mkdir(parents=True, exist_ok=True)
-    (root / "site.toml").write_text(textwrap.dedent(SITE.format(e0=e0, n0=n0, rot=rotation_deg)))
+    (root / "site.toml").write_text(textwrap.dedent(SITE.format(e0=e0, n0=n0, rot=rotation_deg, scale=grid_scale)))
     write_plan(root / "floorplan" / "plan.dxf", units=units)
     for asset, mesh, ext, category in (("kiosk", kiosk_mesh(), "stl", "kiosk"), ("pole", pole_mesh(), "obj", "pole")):
         d = root / "assets" / asset

@@ -136,3 +136,22 @@ def test_resave_source_changes_bytes_not_content(tmp_path):
         for a, b in zip(before.links, after.links):
             for va, vb in zip(a.visuals, b.visuals):
                 assert np.array_equal(va.mesh.vertices, vb.mesh.vertices) and np.array_equal(va.mesh.faces, vb.mesh.faces)
+
+
+def test_scale_rows_put_the_sample_and_the_large_plan_side_by_side():
+    from pipeline.bench.builds import _scale_side_rows
+
+    def side(n, seconds, rss, parse_s, parse_mb, rtf):
+        return {"placements": n, "load_avg": [3.5, 3.0, 2.0], "validate": {"seconds": seconds, "maxrss_bytes": rss},
+                "world": {"parse_s": parse_s, "peak_rss_mb": parse_mb}, "physics": {"real_time_factor": rtf},
+                "elements": {"visuals": 10, "collisions": 4}}
+
+    rows = _scale_side_rows({"sides": {"sample": side(787, 20.0, 1.0e9, 3.0, 900.0, 2.0),
+                                       "scale": side(5000, 70.0, 2.5e9, 12.0, 2091.0, 0.25)}})
+    got = {t: (v, lim) for t, v, lim, _ in rows}
+    assert len(rows) == 10 and all("(load 3.5)" in t for t in got)
+    assert got["787 placements (load 3.5): twin validate under 60 s"] == (20.0, 60.0)
+    assert got["5,000 placements (load 3.5): Gazebo world parse under 1.5 GB"] == (2.091, 1.5)
+    assert got["5,000 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (4.0, 1.0)
+    assert got["787 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (0.5, 1.0)
+    assert "10 visuals, 4 collisions" in next(t for t in got if t.startswith("5,000") and "parse under 10 s" in t)

@@ -82,6 +82,9 @@ def test_every_dae_passes_the_collada_schema(built):
     daes = [f for f in files if f.endswith(".dae")]
     expected = {names.mesh_file(link.name, v.name, k) for link, v in asset.visuals() for k in range(len(v.lods))}
     expected |= {names.collision_file(link.name, c.name) for link in asset.links for c in link.collisions}
+    # the whole model at rest, a file per LOD, and all its collisions in one (the Gazebo world's grouped form)
+    expected |= {names.whole_mesh_file(k) for k in range(1 if asset.lod_count > 1 else 0, asset.lod_count)}
+    expected |= {names.WHOLE_COLLISION_FILE}
     assert daes == sorted(expected)
     for rel in daes:
         result = external.collada_schema(parent / ASSET_ID / rel)

@@ -354,3 +354,59 @@ def test_world_checks_one_grouped_placement_of_each_form(package, tmp_path):
     assert checked.status == "failed"
     assert checked.messages[0] == f"Error: the name 'P4' is used by 2 elements of model '{asset.id}'"
     assert any("P4" in m for m in checked.messages[1:])  # both are checked: sdformat says so too
+
+
+def test_the_collada_schema_compiles_whatever_entity_loader_is_in_place(package, monkeypatch):
+    """The flaky "the COLLADA schema did not compile ... xml:base does not resolve": lxml
+    routes a schema's imports to a parser's resolvers through libxml2's entity loader,
+    one per process, which every parse in any thread sets on entry and puts back on
+    exit. A parse in another thread that ends while a schema compiles puts back
+    libxml2's own loader, which never asks pycollada's resolver for xml.xsd, and the
+    compile fails. Here no resolver answers at all (the state that race leaves): the
+    schema still compiles and validates, as it must whichever loader is in place."""
+    import collada.schema
+
+    parent, asset = package
+    monkeypatch.setattr(collada.schema.ColladaResolver, "resolve", lambda self, url, pubid, context: None)
+    monkeypatch.setattr(external, "_LOCAL", __import__("threading").local())  # compile afresh
+    result = external.collada_schema(parent / asset.id / "meshes" / "base__body__lod0.dae")
+    assert result.status == "passed", result.messages
+
+
+def test_collada_checks_side_by_side_with_parses_many_times(package, tmp_path):
+    """The report's way: fresh threads compile the schema and check files while other
+    threads parse XML (each parse swapping the process's entity loader), 8 rounds of 3
+    in each of 2 fresh processes (a loader left swapped would hide the race from later
+    rounds of one process). The race's window is narrow: this soak did not catch it
+    before the fix in a few hundred compiles; the test above forces its outcome."""
+    import subprocess
+
+    parent, asset = package
+    script = tmp_path / "race.py"
+    script.write_text(f'''
+import sys, threading
+from concurrent.futures import ThreadPoolExecutor
+from lxml import etree
+from pipeline.validate import external
+dae = {str(parent / asset.id / "meshes" / "base__body__lod0.dae")!r}
+doc = b"<a>" + b"<b x='1'>t</b>" * 5000 + b"</a>"
+stop = threading.Event()
+def parse():
+    while not stop.is_set():
+        etree.fromstring(doc)
+parsers = [threading.Thread(target=parse) for _ in range(2)]
+for t in parsers:
+    t.start()
+bad = []
+for _ in range(8):
+    with ThreadPoolExecutor(3) as pool:  # new threads: each compiles its schema
+        bad += [r.messages for r in pool.map(external.collada_schema, [dae] * 3) if r.status != "passed"]
+stop.set()
+for t in parsers:
+    t.join()
+print(len(bad), bad[:1])
+''')
+    for _ in range(2):
+        proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert proc.stdout.startswith("0 "), proc.stdout

@@ -9,6 +9,8 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import subprocess
+import sys
 import textwrap
 from pathlib import Path
 
@@ -376,13 +378,13 @@ def test_unitless_drawing_and_plan_units(tmp_path):
     assert fp.units == "cm ([plan] units; $INSUNITS says m)" and fp.placements[0].x == pytest.approx(0.1)
 
 
-def test_insertion_z_goes_through_grid_scale(tmp_path):
+def test_insertion_z_takes_the_drawing_unit_only(tmp_path):
     doc = new_doc(units=4)
     tagged(doc.modelspace().add_blockref("breaker", (10_000, 20_000, 62_500)), "Z-1")
-    fp, _ = read(doc, tmp_path, grid_scale=0.9996)
+    fp, _ = read(doc, tmp_path)
     (p,) = fp.placements
-    assert (p.x, p.y) == (10.0, 20.0)  # georef applies the scale to x and y
-    assert p.z == pytest.approx(62.5 * 0.9996, rel=1e-15)
+    assert (p.x, p.y) == (10.0, 20.0)  # georef applies grid_scale to x and y only
+    assert p.z == 62.5  # a height is the drawing unit's: grid_scale is horizontal
 
 
 def test_missing_tag_and_level_and_renamed_attributes(tmp_path):
@@ -459,8 +461,8 @@ def test_memo_keeps_handles_and_follows_the_options(tmp_path):
     again = read_floorplan_memo(tmp_path / "plan.dxf", {"breaker"}, {"L1", "L2"}, memo)
     assert again == first and all(isinstance(p.dxf_handles, tuple) for p in again.placements)
     scaled = read_floorplan_memo(tmp_path / "plan.dxf", {"breaker"}, {"L1", "L2"}, memo,
-                                 FloorplanOptions(grid_scale=2.0))
-    assert [p.z for p in scaled.placements] == [2 * p.z for p in first.placements]
+                                 FloorplanOptions(units="cm"))  # the options enter the memo's key
+    assert [p.z for p in scaled.placements] == pytest.approx([p.z / 100 for p in first.placements], rel=1e-15)
 
 
 def test_site_toml_floorplan_and_units(tmp_path):
@@ -476,7 +478,7 @@ def test_site_toml_floorplan_and_units(tmp_path):
     o = site.floorplan_options
     assert o.blocks == (("CB*", "breaker"), ("A$C1", "breaker"))
     assert (o.tag_attribute, o.level_attribute, o.state_attribute) == ("KKS", "LEVEL", "STATE")
-    assert (o.default_level, o.insert_scale, o.units, o.grid_scale) == ("L2", "apply", "ft", 0.9996)
+    assert (o.default_level, o.insert_scale, o.units) == ("L2", "apply", "ft")
     assert load_site(write_site(tmp_path / "plain")).floorplan_options == FloorplanOptions()
     for plan, floorplan, key in (("", '[floorplan]\ndefault_level = "L9"', "floorplan.default_level"),
                                  ('units = "furlong"', "", "plan.units"),
@@ -547,3 +549,43 @@ def test_corpus_plan_builds_a_scene_with_its_handles(corpus, tmp_path):
         assert np.abs(np.array(p["plan"]) - origin * 0.001).max() < 1e-6
         assert angle_diff(p["heading_deg"], heading) < 1e-6
         assert p["tag"] == "insert_" + "_".join(p["dxf_handles"])
+
+
+def test_scaled_inserts_are_one_warning_under_ignore(tmp_path):
+    doc = new_doc()
+    msp = doc.modelspace()
+    for i, s in enumerate((2.0, 2.0, 1.5, 1.0, -1.0)):  # -1 in x and y: a half turn, not a scale
+        tagged(msp.add_blockref("breaker", (i, 0), dxfattribs={"xscale": s, "yscale": s, "zscale": abs(s)}), f"S-{i}")
+    fp, problems = read(doc, tmp_path)
+    assert problems == [] and all(p.scale == 1.0 for p in fp.placements)
+    (warning,) = [w for w in fp.warnings if "scaled" in w]
+    assert warning.startswith("3 INSERTs are drawn scaled (2 x2, 1.5 x1)") and 'insert_scale = "ignore"' in warning
+    fp, _ = read(doc, tmp_path, "apply.dxf", insert_scale="apply")
+    assert [p.scale for p in fp.placements] == pytest.approx([2.0, 2.0, 1.5, 1.0, 1.0], rel=1e-12)
+    assert not [w for w in fp.warnings if "scaled" in w]
+
+
+def test_inserts_absorbed_by_a_mapped_container_are_counted(tmp_path):
+    doc, _ = nested_plan()  # ROW > 2 BAY > 1 breaker each
+    fp, problems = read(doc, tmp_path)
+    assert problems == [] and fp.absorbed == ()  # exploded: nothing absorbed
+    tagged(doc.modelspace().add_blockref("ROW", (300.0, 50.0)), "ROW-2", level="L1")
+    fp, problems = read(doc, tmp_path, "mapped.dxf", blocks=(("ROW", "breaker"),))
+    assert problems == [] and len(fp.placements) == 2
+    assert fp.absorbed == (("ROW", 8),)  # per ROW placement: 2 BAYs and the breaker in each
+
+
+def test_twin_info_counts_the_absorbed_inserts(tmp_path):
+    import mini_sources
+
+    def bolts(msp):  # three INSERTs inside every kiosk: four kiosks absorb twelve
+        msp.doc.blocks.new("BOLT").add_circle((0, 0), 0.01)
+        for i in range(3):
+            msp.doc.blocks.get("kiosk").add_blockref("BOLT", (0.1 * i, 0))
+
+    sources = mini_sources.make(tmp_path / "sources")
+    mini_sources.write_plan(sources / "floorplan" / "plan.dxf", extra=bolts)
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "info", "--sources", str(sources)],
+                          capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "INSERTs absorbed by mapped blocks (their models stand for them): 12 in kiosk x12" in proc.stdout

@@ -180,29 +180,60 @@ def test_gazebo_reads_the_world_meshes_as_written(site):
     assert gazebo.mesh_findings([Path(p) for p in paths], seen["meshes"], str) == []
 
 
+def _world_points(uses: list[dict], place: np.ndarray) -> np.ndarray:
+    """(n, 3) every vertex of the visual meshes Gazebo placed (`uses`: the probe's rows,
+    with model_from_mesh), read from the files with pycollada, in the world frame."""
+    import collada
+
+    points = []
+    for use in uses:
+        m = place @ np.array(use["model_from_mesh"]).reshape(4, 4)
+        for geometry in collada.Collada(use["path"]).scene.objects("geometry"):
+            for prim in geometry.primitives():
+                v = np.asarray(prim.vertex, dtype=np.float64)
+                points.append(v @ m[:3, :3].T + m[:3, 3])
+    return np.concatenate(points)
+
+
 def test_a_grouped_placement_is_where_its_include_would_be(site):
-    """The visual bounds of a placement drawn in a grouped model equal those of its
-    variant placed alone at the frame's pose (as an include would place it)."""
+    """What a placement drawn in a grouped model shows (its one whole-model visual)
+    is what its variant placed alone at the frame's pose (as an include would place
+    it) shows with all its visuals: the same vertices, each where Gazebo puts it."""
     out, world, seen = site
     root = etree.parse(str(world), SAFE).getroot()
-    model = root.find("world/model")
-    frame = model.find("frame")
-    tag, pose = frame.get("name"), [float(v) for v in frame.findtext("pose").split()]
-    alone = out / "alone.sdf"
-    alone.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>model://{model.get("name")}</uri>'
-                     f'<name>{tag}</name><pose>{" ".join(map(str, pose))}</pose></include></world></sdf>\n')
-    single = gazebo.probe_world(alone, [out / "models"])["models"][0]
-    place = np.array(single["world_from_model"]).reshape(4, 4)
-    grouped = next(m for m in seen["models"] if m["name"] == model.get("name"))
-    mine = [u for u in grouped["meshes"] if u["kind"] == "visual" and any(
-        u["uri"] == v.findtext("geometry/mesh/uri") and v.get("name").startswith(tag + "__") for v in model.iter("visual"))]
-    assert mine
-    for use in single["meshes"]:
-        if use["kind"] != "visual":
+    for model in root.findall("world/model"):
+        frame = model.find("frame")
+        tag, pose = frame.get("name"), [float(v) for v in frame.findtext("pose").split()]
+        alone = out / "alone.sdf"
+        alone.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>model://{model.get("name")}</uri>'
+                         f'<name>{tag}</name><pose>{" ".join(map(str, pose))}</pose></include></world></sdf>\n')
+        single = gazebo.probe_world(alone, [out / "models"])["models"][0]
+        theirs = _world_points([u for u in single["meshes"] if u["kind"] == "visual"],
+                               np.array(single["world_from_model"]).reshape(4, 4))
+        grouped = next(m for m in seen["models"] if m["name"] == model.get("name"))
+        mine_names = {v.findtext("geometry/mesh/uri") for v in model.iter("visual") if v.get("name") == f"{tag}__whole"}
+        if not mine_names:  # the finest level of a model with coarser ones: each visual as in its variant
+            assert model.get("name") == model.get("name").split("__lod")[0]
+            mine = [u for u in grouped["meshes"] if u["kind"] == "visual"]
+            for use in single["meshes"]:
+                if use["kind"] == "visual":
+                    world_from_mesh = np.array(single["world_from_model"]).reshape(4, 4) @ np.array(
+                        use["model_from_mesh"]).reshape(4, 4)
+                    assert any(np.allclose(np.array(u["model_from_mesh"]).reshape(4, 4), world_from_mesh, atol=1e-9)
+                               for u in mine if u["uri"] == use["uri"])
             continue
-        world_from_mesh = place @ np.array(use["model_from_mesh"]).reshape(4, 4)
-        assert any(np.allclose(np.array(u["model_from_mesh"]).reshape(4, 4), world_from_mesh, atol=1e-9)
-                   for u in mine if u["uri"] == use["uri"])
+        assert len(mine_names) == 1 and "whole__lod" in next(iter(mine_names))
+        # its row: the whole model's visual sits at its frame (the pose relative to it is 0)
+        mine = [u for u in grouped["meshes"] if u["kind"] == "visual" and u["uri"] in mine_names and np.allclose(
+            np.array(u["model_from_mesh"]).reshape(4, 4)[:3, 3], pose[:3], atol=1e-9)]
+        assert len(mine) == 1
+        ours = _world_points(mine, np.array(grouped["world_from_model"]).reshape(4, 4))
+        assert len(ours) == len(theirs)
+        np.testing.assert_allclose(np.sort(ours, axis=0), np.sort(theirs, axis=0), atol=1e-6)
+        # one visual and one collision a placement
+        assert len([v for v in model.iter("visual") if v.find("pose").get("relative_to") == tag]) == 1
+        assert len([c for c in model.iter("collision") if c.find("pose").get("relative_to") == tag]) <= 1
+    assert any(m.find("link/visual").get("name").endswith("__whole") for m in root.findall("world/model"))
 
 
 def test_dartsim_builds_and_steps_the_world(site):
@@ -210,3 +241,29 @@ def test_dartsim_builds_and_steps_the_world(site):
     physics = seen["physics"]
     assert physics["ok"] and physics["failed_shapes"] == 0 and physics["collision_detector"] == "bullet"
     assert physics["mesh_shapes"] + physics["primitive_shapes"] > 0 and physics["steps"] == 200
+
+
+def test_devices_piled_on_one_point_collide_once(site):
+    """Placements of one asset at one pose (real drawings pile blocks on one insertion
+    point) are each drawn, but their collision is in the world once: dartsim would
+    test every copy against every other at each step. Near (LOD 0: each visual and
+    collision as in the package) and far (the whole model)."""
+    from pipeline.scene.placements import Placed, yaw_matrix
+    from pipeline.scene.world_sdf import grouped_model
+
+    out, _, _ = site
+    spot = [Placed(ir.Placement(f"K-{i}", "kiosk", "L1", 0.0, 0.0), yaw_matrix(0.5, (3.0, 4.0, 1.0)), 0.5)
+            for i in range(5)]
+    apart = Placed(ir.Placement("K-9", "kiosk", "L1", 9.0, 0.0), yaw_matrix(0.5, (12.0, 4.0, 1.0)), 0.5)
+    turned = Placed(ir.Placement("K-8", "kiosk", "L1", 0.0, 0.0), yaw_matrix(0.7, (3.0, 4.0, 1.0)), 0.7)
+    seen: set = set()
+    model = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", [*spot, apart, turned], collisions=seen)
+    assert len(model.findall("link/visual")) == 7
+    assert sorted(c.find("pose").get("relative_to") for c in model.findall("link/collision")) == ["K-0", "K-8", "K-9"]
+    again = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", spot[:1], name="K-0b", collisions=seen)
+    assert again.findall("link/collision") == []  # shared by every model of one world
+    # the same at a coarse level, where each placement draws the whole model
+    far = [Placed(p.placement, p.pose, p.yaw, lod=1) for p in (*spot, apart)]
+    model = grouped_model("kiosk__lod1", out / "models" / "kiosk__lod1" / "model.sdf", far, collisions=set())
+    assert [v.get("name") for v in model.findall("link/visual")] == [f"{p.placement.tag}__whole" for p in far]
+    assert [c.get("name") for c in model.findall("link/collision")] == ["K-0__collision", "K-9__collision"]

@@ -150,7 +150,9 @@ def test_the_thumbnail_shows_the_texture():
 
 # --- real inputs: textures read from the corpus reach the outputs ---------------------
 
-CORPUS = Path(__file__).resolve().parents[2] / "shared" / "corpus"
+# ../shared/corpus beside the checkout (a worktree in /work/wt/<name> has it one further up)
+CORPUS = next((p / "shared" / "corpus" for p in Path(__file__).resolve().parents[2:4] if (p / "shared" / "corpus").is_dir()),
+              Path(__file__).resolve().parents[2] / "shared" / "corpus")
 corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus")
 
 
@@ -203,3 +205,90 @@ def test_a_textured_glb_keeps_its_texture(tmp_path):
     assert Image.open(io.BytesIO(texture.data)).size == (2048, 2048)
     painted = [v for _, v in asset.visuals() if asset.material(v.material).base_color_texture is not None]
     assert painted and all(v.mesh.uvs is not None for v in painted)
+
+
+# --- the scene glTF carries its instances' textures -----------------------------------
+
+
+def _scene_images(path: Path) -> tuple[dict, list[bytes]]:
+    from pipeline import glb
+
+    doc, binary = glb.read(path)
+    data = []
+    for image in doc.get("images", []):
+        view = doc["bufferViews"][image["bufferView"]]
+        data.append(binary[view.get("byteOffset", 0): view.get("byteOffset", 0) + view["byteLength"]])
+    return doc, data
+
+
+def _place_in_scene(models: Path, tags_assets: list[tuple[str, str]], out: Path) -> Path:
+    from pipeline.scene import scene_gltf
+    from pipeline.scene.placements import Placed, yaw_matrix
+
+    placed = [Placed(ir.Placement(tag, asset, "L1", 3.0 * i, 0.0), yaw_matrix(0.3 * i, (3.0 * i, 0.0, 0.0)), 0.3 * i)
+              for i, (tag, asset) in enumerate(tags_assets)]
+    path = out / "scene.glb"
+    scene_gltf.write(path, models=models, placed=placed, terrain_model="ground", origin_llh=(-12.0, -38.0, 40.0),
+                     crs="EPSG:31984", site_name="t", sun={"elevation_deg": 40.0, "azimuth_deg": 30.0,
+                                                          "illuminance_lux": 90000.0})
+    return path
+
+
+def test_the_scene_glb_carries_each_image_once(tmp_path):
+    """Two textured models sharing an albedo image, placed three times: the scene has
+    each distinct image once, every material's texture resolves to its model's image,
+    and the Khronos validator accepts it (it found UNRESOLVED_REFERENCE before)."""
+    cabinet = _textured_asset()
+    albedo = cabinet.material("painted").base_color_texture
+    other = ir.Material("other", base_color=(1, 1, 1, 1), base_color_texture=albedo,
+                        normal_texture=ir.Texture("door_normal", _image("PNG", seed=5)))
+    door = ir.Asset("door", "control", (ir.Link("base", visuals=(ir.Visual(
+        "leaf", "other", (box_mesh((0.8, 0.05, 2), (0, 0, 1), attributes=True),)),)),), materials=(other,))
+    ground = ir.Asset("ground", "terrain", (ir.Link("g", visuals=(ir.Visual(
+        "g", "plain", (box_mesh((50, 50, 0.1)),)),)),), materials=(ir.Material("plain"),))
+    models = tmp_path / "models"
+    for asset in (cabinet, door, ground):
+        write_package(asset, models)
+    path = _place_in_scene(models, [("C-1", "cabinet"), ("C-2", "cabinet"), ("D-1", "door")], tmp_path)
+    (result,) = external.gltf_validator([path])
+    assert result.status == "passed", result.messages
+    doc, images = _scene_images(path)
+    want = {t.data for a in (cabinet, door) for t in a.textures().values()}
+    assert len(images) == len(set(images)) == len(want) == 4 and set(images) == want
+    for material in doc["materials"]:
+        refs: list[dict] = []
+        from pipeline import glb
+
+        glb.texture_refs(material, refs)
+        for ref in refs:
+            assert images[doc["textures"][ref["index"]]["source"]] in want
+    painted = next(m for m in doc["materials"] if m["name"] == "painted")
+    leaf = next(m for m in doc["materials"] if m["name"] == "other")
+    source = lambda m: doc["textures"][m["pbrMetallicRoughness"]["baseColorTexture"]["index"]]["source"]  # noqa: E731
+    assert source(painted) == source(leaf) and images[source(painted)] == albedo.data
+
+
+@corpus
+def test_the_corpus_textured_assets_placed_in_a_scene(tmp_path):
+    """The corpus's milk truck (.glb) and telephone pole (COLLADA, Gazebo layout) read,
+    packaged and placed: the scene glb holds each of their images once and validates."""
+    import shutil
+
+    truck = _read_tree(tmp_path / "t", "truck", lambda sh, f: sh.copy(CORPUS / "mesh" / "CesiumMilkTruck.glb", f),
+                       'category = "truck"\nsource = "CesiumMilkTruck.glb"\n')
+    pole_src = CORPUS / "mesh" / "telephone_pole"
+    pole = _read_tree(tmp_path / "p", "pole", lambda sh, f: (sh.copy(pole_src / "meshes" / "telephone_pole.dae", f),
+                                                             sh.copytree(pole_src / "materials", f / "materials")),
+                      'category = "pole"\nsource = "telephone_pole.dae"\n')
+    ground = ir.Asset("ground", "terrain", (ir.Link("g", visuals=(ir.Visual(
+        "g", "plain", (box_mesh((50, 50, 0.1)),)),)),), materials=(ir.Material("plain"),))
+    models = tmp_path / "models"
+    for asset in (truck, pole, ground):
+        write_package(asset, models)
+    path = _place_in_scene(models, [("T-1", "truck"), ("T-2", "truck"), ("P-1", "pole"), ("P-2", "pole")], tmp_path)
+    (result,) = external.gltf_validator([path])
+    assert result.status == "passed", result.messages
+    _, images = _scene_images(path)
+    want = {t.data for a in (truck, pole) for t in a.textures().values()}
+    assert len(want) >= 3 and len(images) == len(set(images)) and set(images) == want
+    shutil.rmtree(models)

@@ -301,22 +301,42 @@ def placements(ctx: Context, sources: Path, built: Path, multiples: list[int], r
     return out
 
 
+def _validate_measured(ctx: Context, sources: Path, built: Path, name: str) -> dict:
+    """twin validate of `built`, measured, with what its report says of the Gazebo world
+    (the probe's parse time and peak memory, dartsim's real-time factor, the element
+    counts) and the load average when it started (the machine is shared)."""
+    import os
+
+    load = os.getloadavg()
+    cmd = [sys.executable, "-m", "pipeline.cli", "validate", "--sources", str(sources), "--out", str(built)]
+    check = run_measured(cmd, ctx.work / "logs" / name)
+    if check["returncode"] not in (0, 1):  # 1: the report holds errors
+        raise BuildFailed(f"twin validate ({name}) exited {check['returncode']}")
+    reports = built / "reports"
+    timings = json.loads((reports / "timings.json").read_text())
+    report = json.loads((reports / "validation.json").read_text())
+    gazebo = timings.get("gazebo", {})
+    return {"validate": check, "load_avg": [round(v, 2) for v in load], "world": gazebo.get("world", {}),
+            "physics": gazebo.get("physics", {}), "elements": report["scene"].get("gazebo", {}),
+            "placements": report["scene"]["placements"], "summary": report["summary"]}
+
+
 def scale_run(ctx: Context, sources: Path, built: Path, placements: int, piled: int) -> dict:
-    """Build and validate plans.at_scale in `built` (the sample's build folder, so the
-    assets come from the cache), then build the sample again there."""
+    """Validate the sample's build in `built`, then build and validate plans.at_scale
+    there (the assets come from the cache), then build the sample again there: the
+    sample and the large plan side by side in one run."""
+    sample = _validate_measured(ctx, sources, built, "sample_validate")
     variant = plans.at_scale(sources, ctx.work / "scale", placements, piled)
     build = run_build(ctx, variant, built, 2, "scale")
-    cmd = [sys.executable, "-m", "pipeline.cli", "validate", "--sources", str(variant), "--out", str(built)]
-    check = run_measured(cmd, ctx.work / "logs" / "scale_validate")
-    if check["returncode"] not in (0, 1):  # 1: the report holds errors
-        raise BuildFailed(f"twin validate (scale) exited {check['returncode']}")
+    large = _validate_measured(ctx, variant, built, "scale_validate")
     reports = built / "reports"
-    summary = json.loads((reports / "validation.json").read_text())["summary"]
+    summary = large["summary"]
     sizes = {name: (reports / name).stat().st_size for name in ("validation.json", "validation.html", "junit.xml")}
     sizes["placements.json"] = (built / "scene" / "placements.json").stat().st_size
     run_build(ctx, sources, built, 2, "scale_restore")
-    return {"placements": placements, "piled": piled, "build": build, "validate": check, "bytes": sizes,
-            "errors": summary["errors"], "warnings": summary["warnings"], "by_code": summary["by_code"]}
+    return {"placements": placements, "piled": piled, "build": build, "validate": large["validate"], "bytes": sizes,
+            "errors": summary["errors"], "warnings": summary["warnings"], "by_code": summary["by_code"],
+            "sides": {"sample": sample, "scale": large}}
 
 
 def large_plan(ctx: Context, sources: Path, multiple: int, min_r: int, max_r: int, budget: float) -> dict:
@@ -426,6 +446,7 @@ def targets(d: dict) -> list[dict]:
     ]
     rows += _large_plan_rows(d["large_plan"], cold2)
     rows.append(_scale_row(d["scale"]))
+    rows += _scale_side_rows(d["scale"])
     return [{"target": t, "value": float(v), "limit": lim, "unit": u, "met": bool(v <= lim)} for t, v, lim, u in rows]
 
 
@@ -457,6 +478,30 @@ def _scale_row(scale: dict) -> tuple:
             f"(build {scale['build']['seconds']:.1f} s; reports {reports / 1e6:.2f} MB, placements.json "
             f"{scale['bytes']['placements.json'] / 1e6:.2f} MB; {scale['errors']:,} errors, "
             f"{scale['warnings']:,} warnings)", scale["validate"]["seconds"], 60.0, "s")
+
+
+def _scale_side_rows(scale: dict) -> list[tuple]:
+    """The scale row, the sample's and the large plan's side by side: validate time and
+    peak memory, the Gazebo world's parse time and memory and dartsim's wall time per
+    simulated second (1 / real-time factor), each with the load it ran under."""
+    rows = []
+    for side in ("sample", "scale"):
+        d = scale.get("sides", {}).get(side)
+        if not d:
+            continue
+        at = f"{d['placements']:,} placements (load {d['load_avg'][0]:.1f})"
+        rows.append((f"{at}: twin validate under 60 s", d["validate"]["seconds"], 60.0, "s"))
+        rows.append((f"{at}: twin validate peak memory under 2 GB (largest process)",
+                     d["validate"]["maxrss_bytes"] / 1e9, 2.0, "GB"))
+        world, physics = d.get("world", {}), d.get("physics", {})
+        if "parse_s" in world:
+            counts = ", ".join(f"{d['elements'].get(k, 0):,} {k}" for k in ("visuals", "collisions"))
+            rows.append((f"{at}: Gazebo world parse under 10 s ({counts})", world["parse_s"], 10.0, "s"))
+            rows.append((f"{at}: Gazebo world parse under 1.5 GB", world["peak_rss_mb"] / 1000.0, 1.5, "GB"))
+        if physics.get("real_time_factor"):
+            rows.append((f"{at}: dartsim (bullet) at real time or faster (wall s per simulated s)",
+                         1.0 / physics["real_time_factor"], 1.0, "ratio"))
+    return rows
 
 
 def _all_series(d: dict):

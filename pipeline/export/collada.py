@@ -25,6 +25,7 @@ from pipeline.errors import UserError
 from pipeline.export import names
 from pipeline.export.textures import texture_file
 from pipeline.export.variants import variant_collisions, variant_visuals
+from pipeline.geometry.merge import merge_meshes
 from pipeline.geometry.metrics import stored_normals
 
 # pycollada stamps <created>/<modified> with the current time; a fixed date keeps two
@@ -78,7 +79,72 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
         for col in merged:
             _write_document(folder / col.mesh_file, col.name, col.mesh(), None, {}, memo)
             written.append(col.mesh_file)
+    written += _write_whole(asset, folder, memo)
     return sorted(written)
+
+
+def _write_whole(asset: ir.Asset, folder: Path, memo) -> list[str]:
+    """The whole model at rest, per coarse LOD (names.whole_mesh_file), and all its collision
+    meshes in one (names.WHOLE_COLLISION_FILE), in the model frame. A grouped placement
+    of the Gazebo world draws each as one element: sdformat spends about 160 kB of
+    memory on every <visual> or <collision> whatever it holds (tools/gzprobe), so a site
+    of thousands of placements fits only with one of each a placement."""
+    written = []
+    # not the finest level of an asset that has coarser ones: the few placements near
+    # the inspection points keep each visual with its own SDF material (its PBR terms),
+    # and the largest of the files is not written twice
+    for level in range(1 if asset.lod_count > 1 else 0, asset.lod_count):
+        by_material: dict[str, list] = {}
+        for link in asset.links:
+            for visual in variant_visuals(asset, link, level):
+                by_material.setdefault(visual.material, []).append((link.pose @ visual.pose, visual.mesh(level)))
+        groups = [(asset.material(name), merge_meshes(parts))
+                  for name, parts in sorted(by_material.items())]
+        if groups:
+            rel = names.whole_mesh_file(level)
+            _write_whole_document(folder / rel, groups, memo)
+            written.append(rel)
+    parts = [(link.pose @ c.pose, c.mesh) for link in asset.links for c in link.collisions]
+    if parts:
+        _write_document(folder / names.WHOLE_COLLISION_FILE, "whole_collision", merge_meshes(parts), None, {}, memo)
+        written.append(names.WHOLE_COLLISION_FILE)
+    return written
+
+
+def _write_whole_document(path: Path, groups: list[tuple[ir.Material, ir.Mesh]], memo) -> None:
+    key = sha256_json(["whole", [[m.key(), mesh.digest] for m, mesh in groups]])
+    if memo is not None and memo.link(key, path):
+        return
+    doc = _new_document()
+    arrays: dict[str, np.ndarray] = {}
+    nodes = []
+    for k, (material, mesh) in enumerate(groups):
+        ident = f"part{k}_{names.safe_name(material.name)}"
+        part_arrays, inputs, sources = _sources(ident, mesh)
+        arrays.update(part_arrays)
+        geom = dae_geometry.Geometry(doc, f"{ident}-mesh", ident, sources)
+        geom.primitives.append(geom.createTriangleSet(_corner_indices(mesh.faces, len(sources)), inputs, _MATERIAL_SYMBOL))
+        doc.geometries.append(geom)
+        mat = _phong_material(doc, material)
+        uv_binding = [(_UV_SET, "TEXCOORD", "0")] if material.base_color_texture is not None else []
+        nodes.append(dae_scene.Node(ident, children=[dae_scene.GeometryNode(
+            geom, [dae_scene.MaterialNode(_MATERIAL_SYMBOL, mat, inputs=uv_binding)])], name=ident))
+    ids = [im.id for im in doc.images]  # materials sharing an image list it once (ids are unique)
+    for i in reversed(range(len(ids))):
+        if ids[i] in ids[:i]:
+            del doc.images[i]
+    scene = dae_scene.Scene("Scene", nodes)
+    doc.scenes.append(scene)
+    doc.scene = scene
+    doc.save()
+    root = doc.xmlnode.getroot()
+    _reformat_floats(root, arrays)
+    for el in root.iter("{*}transparent"):
+        el.set("opaque", "A_ONE")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(etree.tostring(root, xml_declaration=True, encoding="utf-8", pretty_print=True))
+    if memo is not None:
+        memo.keep(key, path)
 
 
 def _write_document(path: Path, node_name: str, mesh: ir.Mesh, material: ir.Material | None,
@@ -117,15 +183,7 @@ def _dae_bytes(node_name: str, mesh: ir.Mesh, material: ir.Material | None) -> b
 def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
     """A pycollada document with one geometry, one material and one node, plus the
     float arrays by id (pycollada rounds them to 7 digits on save; we write them)."""
-    doc = collada.Collada()
-    doc.assetInfo = dae_asset.Asset(
-        created=_FIXED_DATE,
-        modified=_FIXED_DATE,
-        unitname="meter",
-        unitmeter=1,
-        upaxis=dae_asset.UP_AXIS.Z_UP,
-        contributors=[dae_asset.Contributor(authoring_tool=_TOOL)],
-    )
+    doc = _new_document()
     # COLLADA 1.4.1 types every name attribute xs:NCName: a CAD part called "10" would
     # fail the schema, so names take the same safe spelling as ids
     ident = names.safe_name(node_name)
@@ -146,6 +204,19 @@ def _document(node_name: str, mesh: ir.Mesh, material: ir.Material | None):
     doc.scenes.append(scene)
     doc.scene = scene
     return doc, arrays
+
+
+def _new_document():
+    doc = collada.Collada()
+    doc.assetInfo = dae_asset.Asset(
+        created=_FIXED_DATE,
+        modified=_FIXED_DATE,
+        unitname="meter",
+        unitmeter=1,
+        upaxis=dae_asset.UP_AXIS.Z_UP,
+        contributors=[dae_asset.Contributor(authoring_tool=_TOOL)],
+    )
+    return doc
 
 
 def _corner_indices(faces: np.ndarray, streams: int) -> np.ndarray:

@@ -40,6 +40,16 @@ def merged_collision_file(link: str) -> str:
     return f"meshes/{safe_name(link)}__collision__merged.dae"
 
 
+def whole_mesh_file(lod: int) -> str:
+    """Package-relative COLLADA file of the whole model at rest at one LOD: every visual
+    of every link in the model frame, one submesh per material (a grouped placement in
+    the Gazebo world draws it as one visual)."""
+    return f"meshes/whole__lod{lod}.dae"
+
+
+WHOLE_COLLISION_FILE = "meshes/whole__collision.dae"  # every collision mesh, model frame
+
+
 def collision_file(link: str, collision: str) -> str:
     return f"meshes/{safe_name(link)}__{safe_name(collision)}__collision.dae"
 

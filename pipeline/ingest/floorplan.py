@@ -72,6 +72,9 @@ class _Reading:
     inserts: Counter = field(default_factory=Counter)  # block name -> INSERTs met
     left_out: Counter = field(default_factory=Counter)  # unmapped blocks with nothing placeable
     placeable: dict[str, bool] = field(default_factory=dict)  # block name -> holds a placement
+    nested: dict[str, int] = field(default_factory=dict)  # block name -> INSERTs in it, any depth
+    absorbed: Counter = field(default_factory=Counter)  # mapped block -> INSERTs inside its placements
+    scaled: Counter = field(default_factory=Counter)  # scale factor -> placements drawn at it
 
     def problem(self, obj: str, message: str) -> None:
         self.problems.append(UserError(self.path, obj, message))
@@ -138,6 +141,7 @@ def scan_floorplan(path, known_assets: set[str] | None = None, levels: set[str] 
         inserts=tuple(sorted(r.inserts.items())),
         warnings=tuple(_warnings(r, doc, platforms, levels)),
         conductor_lines=tuple(lines),
+        absorbed=tuple(sorted(r.absorbed.items())),
     )
     return fp, r.problems
 
@@ -343,6 +347,8 @@ def _place(r: _Reading, insert, matrix, chain: tuple[str, ...], attrs: dict[str,
     except _Unplaceable as e:
         r.problem(where, f"block {block!r}: {e}")
         return
+    if abs(scale - 1.0) > UNIFORM_SCALE_REL:
+        r.scaled[round(scale, 6)] += 1
     if tag is None:
         tag = "insert_" + "_".join(chain)  # handles are stable across saves of a drawing
     elif not SAFE_TAG.match(tag):
@@ -358,19 +364,33 @@ def _place(r: _Reading, insert, matrix, chain: tuple[str, ...], attrs: dict[str,
         r.problem(where, f"{r.options.level_attribute} {level!r} is not a level of site.toml ({', '.join(sorted(r.levels))})")
         return
     x, y, z = origin * r.to_m
+    absorbed = _nested_inserts(r, block, insert.doc)
+    if absorbed:
+        r.absorbed[block] += absorbed
     r.placements.append(ir.Placement(
         tag=tag,
         asset_id=asset,
         level=level,
         x=float(x),
         y=float(y),
-        z=float(z) * r.options.grid_scale,
+        z=float(z),  # grid_scale is the projection's horizontal factor: a height takes the unit only
         heading_deg=heading,
         state=attrs.get("state") or None,
         handle=chain[-1],
         dxf_handles=chain,
         scale=scale if r.options.insert_scale == "apply" else 1.0,
     ))
+
+
+def _nested_inserts(r: _Reading, block: str, doc) -> int:
+    """INSERTs inside a block's definition, at any depth: what one placement of a mapped
+    block absorbs (its model stands for them)."""
+    if block not in r.nested:
+        r.nested[block] = 0  # a block that contains itself counts once
+        layout = doc.blocks.get(block) if doc is not None else None
+        inner = [e.dxf.name for e in layout if e.dxftype() == "INSERT"] if layout is not None else []
+        r.nested[block] = sum(1 + _nested_inserts(r, name, doc) for name in inner)
+    return r.nested[block]
 
 
 def _pose(matrix) -> tuple[np.ndarray, float, float]:
@@ -426,6 +446,10 @@ def _warnings(r: _Reading, doc, platforms: list[ir.Platform], levels) -> list[st
         out.append(f"{sum(r.left_out.values())} INSERTs of {len(r.left_out)} blocks place nothing and are left "
                    f"out: {listed} (map a block to an asset in site.toml [floorplan] blocks to "
                    f"place it){hint}")
+    if r.scaled and r.options.insert_scale == "ignore":
+        factors = ", ".join(f"{k:g} x{n}" for k, n in sorted(r.scaled.items(), key=lambda kv: (-kv[1], kv[0])))
+        out.append(f"{sum(r.scaled.values())} INSERTs are drawn scaled ({factors}) and placed at scale 1: "
+                   'site.toml [floorplan] insert_scale = "ignore" (set "apply" to place them at their scale)')
     if not r.placements:
         met = ", ".join(f"{b} x{n}" for b, n in sorted(r.inserts.items(), key=lambda kv: (-kv[1], kv[0])))
         out.append(f"no placements: {sum(r.inserts.values())} INSERTs of {len(r.inserts)} blocks"
@@ -528,7 +552,7 @@ def _floorplan_to_json(fp: ir.FloorPlan) -> dict:
     return {"path": fp.path, "units": fp.units, "placements": [asdict(p) for p in fp.placements],
             "platforms": [{"level": p.level, "outline": p.outline.tolist(), "handle": p.handle} for p in fp.platforms],
             "ignored": [list(i) for i in fp.ignored], "inserts": [list(i) for i in fp.inserts],
-            "warnings": list(fp.warnings),
+            "warnings": list(fp.warnings), "absorbed": [list(i) for i in fp.absorbed],
             "conductor_lines": [[h, layer, [list(v) for v in pts]] for h, layer, pts in fp.conductor_lines]}
 
 
@@ -540,5 +564,6 @@ def _floorplan_from_json(d: dict) -> ir.FloorPlan:
                         ignored=tuple((str(k), int(n)) for k, n in d["ignored"]),
                         inserts=tuple((str(k), int(n)) for k, n in d["inserts"]),
                         warnings=tuple(str(w) for w in d["warnings"]),
+                        absorbed=tuple((str(k), int(n)) for k, n in d.get("absorbed", ())),
                         conductor_lines=tuple((str(h), str(layer), tuple((float(x), float(y)) for x, y in pts))
                                               for h, layer, pts in d.get("conductor_lines", [])))

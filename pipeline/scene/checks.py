@@ -208,6 +208,7 @@ def check_placements(site, fp: ir.FloorPlan, placed, manifests: dict[str, dict],
     kept = [pl for pl in placed if pl.placement.asset_id in manifests]
     if kept:
         bounds = np.array([manifests[pl.placement.asset_id]["bounds"] for pl in kept], dtype=np.float64)
+        bounds *= np.array([pl.placement.scale for pl in kept], dtype=np.float64)[:, None, None]
         poses = np.array([pl.pose for pl in kept])
         label, depth = overlap_clusters(footprints(poses, bounds[:, 0], bounds[:, 1]), OVERLAP_TOLERANCE_M)
         out += _overlap_findings([pl.placement.tag for pl in kept], poses[:, :3, 3], label, depth)

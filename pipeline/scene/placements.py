@@ -29,6 +29,13 @@ class Placed:
     distance_m: float = float("inf")
 
 
+def scaled_pose(pl: Placed) -> np.ndarray:
+    """(4, 4) float64 model frame -> ENU with the placement's uniform scale applied
+    (the pose itself stays rigid: distances and footprints scale the bounds instead)."""
+    s = pl.placement.scale
+    return pl.pose if s == 1.0 else pl.pose @ np.diag([s, s, s, 1.0])
+
+
 def yaw_matrix(yaw: float, position) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     m = np.eye(4)
@@ -78,8 +85,9 @@ def choose_lods(placed: list[Placed], manifests: dict[str, dict], eyes: np.ndarr
     inverse = np.linalg.inv(np.array([pl.pose for pl in placed]))  # (n, 4, 4)
     local = (np.c_[eyes, np.ones(len(eyes))] @ inverse.transpose(0, 2, 1))[:, :, :3]  # (n, eyes, 3)
     assets = [pl.placement.asset_id for pl in placed]
-    lo = np.array([manifests[a]["bounds"][0] for a in assets], dtype=np.float64)[:, None]
-    hi = np.array([manifests[a]["bounds"][1] for a in assets], dtype=np.float64)[:, None]
+    scale = np.array([pl.placement.scale for pl in placed], dtype=np.float64)
+    lo = (np.array([manifests[a]["bounds"][0] for a in assets], dtype=np.float64) * scale[:, None])[:, None]
+    hi = (np.array([manifests[a]["bounds"][1] for a in assets], dtype=np.float64) * scale[:, None])[:, None]
     distance = np.linalg.norm(local - np.clip(local, lo, hi), axis=2).min(axis=1)
     level = np.zeros(len(placed), dtype=int)
     names = np.array(assets, dtype=object)
@@ -88,7 +96,7 @@ def choose_lods(placed: list[Placed], manifests: dict[str, dict], eyes: np.ndarr
         of_asset = np.nonzero(names == asset_id)[0]
         for lod in m["lods"]:
             if lod["level"] < len(m["lod_models"]) + 1:
-                px = screen_error_px(lod["error_m"], distance[of_asset], site.reference_hfov_rad,
+                px = screen_error_px(lod["error_m"] * scale[of_asset], distance[of_asset], site.reference_hfov_rad,
                                      site.reference_width_px)
                 level[of_asset] = np.where(px <= site.screen_tolerance_px, lod["level"], level[of_asset])
     return [Placed(pl.placement, pl.pose, pl.yaw, int(k), float(d)) for pl, k, d in zip(placed, level, distance)]

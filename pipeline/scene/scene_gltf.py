@@ -11,6 +11,7 @@ It reads the built model .glb files (the packages are its input, not the IR).
 
 from __future__ import annotations
 
+import hashlib
 import json
 from collections import defaultdict
 from pathlib import Path
@@ -21,6 +22,7 @@ import numpy as np
 from .. import glb
 from ..export.names import gltf_file
 from ..geometry.transform import quaternion_from_matrix
+from . import placements as placing
 from .placements import Placed
 
 
@@ -30,11 +32,15 @@ class SceneBuilder:
     def __init__(self):
         self.doc = {"asset": {"version": "2.0", "generator": "substation-twin"}, "scene": 0,
                     "scenes": [{"name": "scene", "nodes": []}], "nodes": [], "meshes": [],
-                    "materials": [], "accessors": [], "bufferViews": [], "buffers": []}
+                    "materials": [], "textures": [], "images": [], "samplers": [],
+                    "accessors": [], "bufferViews": [], "buffers": []}
         self.buffer = glb.Buffer(self.doc["bufferViews"], self.doc["accessors"])
         self.used_ext: set[str] = set()
         self._mesh_cache: dict[tuple[str, int], int] = {}
         self._material_cache: dict[tuple[str, int], int] = {}
+        self._texture_cache: dict[tuple[str, int], int] = {}
+        self._image_cache: dict[bytes, int] = {}  # the image's content (and type) -> index: each once
+        self._sampler_cache: dict[str, int] = {}
         self.variants: list[str] = []  # KHR_materials_variants names, in order of first use
 
     def _copy_accessor(self, src: dict, src_bin: bytes, index: int) -> int:
@@ -47,10 +53,51 @@ class SceneBuilder:
         self.doc["accessors"].append(acc)
         return len(self.doc["accessors"]) - 1
 
-    def _copy_material(self, key: str, src: dict, index: int) -> int:
+    def _copy_image(self, src: dict, src_bin: bytes, index: int) -> int:
+        image = dict(src["images"][index])
+        if "bufferView" in image:
+            view = src["bufferViews"][image["bufferView"]]
+            start = view.get("byteOffset", 0)
+            data = src_bin[start: start + view["byteLength"]]
+        else:  # a data: URI (a model .glb has no files beside it)
+            data = image.get("uri", "").encode()
+        ck = hashlib.sha256(image.get("mimeType", "").encode() + b"\0" + data).digest()
+        if ck not in self._image_cache:
+            if "bufferView" in image:
+                image["bufferView"] = self.buffer.add_view(data)
+            self.doc["images"].append(image)
+            self._image_cache[ck] = len(self.doc["images"]) - 1
+        return self._image_cache[ck]
+
+    def _copy_texture(self, key: str, src: dict, src_bin: bytes, index: int) -> int:
+        """A texture of a model into the scene: its sampler (one per distinct setting)
+        and its images (each distinct image once, whichever models share it)."""
+        ck = (key, index)
+        if ck not in self._texture_cache:
+            tex = json.loads(json.dumps(src["textures"][index]))
+            if "sampler" in tex:
+                sampler = json.dumps(src["samplers"][tex["sampler"]], sort_keys=True)
+                if sampler not in self._sampler_cache:
+                    self.doc["samplers"].append(json.loads(sampler))
+                    self._sampler_cache[sampler] = len(self.doc["samplers"]) - 1
+                tex["sampler"] = self._sampler_cache[sampler]
+            for holder in (tex, *tex.get("extensions", {}).values()):  # EXT_texture_webp & co. name a source too
+                if isinstance(holder, dict) and "source" in holder:
+                    holder["source"] = self._copy_image(src, src_bin, holder["source"])
+            self.used_ext.update(tex.get("extensions", {}))
+            self.doc["textures"].append(tex)
+            self._texture_cache[ck] = len(self.doc["textures"]) - 1
+        return self._texture_cache[ck]
+
+    def _copy_material(self, key: str, src: dict, src_bin: bytes, index: int) -> int:
         ck = (key, index)
         if ck not in self._material_cache:
             mat = json.loads(json.dumps(src["materials"][index]))
+            refs: list[dict] = []
+            glb.texture_refs(mat, refs)
+            for ref in refs:
+                ref["index"] = self._copy_texture(key, src, src_bin, ref["index"])
+                self.used_ext.update(ref.get("extensions", {}))  # KHR_texture_transform
             for ext in mat.get("extensions", {}):
                 self.used_ext.add(ext)
             self.doc["materials"].append(mat)
@@ -69,13 +116,13 @@ class SceneBuilder:
             if "indices" in p:
                 q["indices"] = self._copy_accessor(src, src_bin, p["indices"])
             if "material" in p:
-                q["material"] = self._copy_material(key, src, p["material"])
+                q["material"] = self._copy_material(key, src, src_bin, p["material"])
             if "targets" in p:
                 q["targets"] = [{a: self._copy_accessor(src, src_bin, i) for a, i in sorted(t.items())}
                                 for t in p["targets"]]
             mappings = p.get("extensions", {}).get("KHR_materials_variants", {}).get("mappings")
             if mappings:
-                q["extensions"] = {"KHR_materials_variants": {"mappings": self._copy_mappings(key, src, mappings)}}
+                q["extensions"] = {"KHR_materials_variants": {"mappings": self._copy_mappings(key, src, src_bin, mappings)}}
             prims.append(q)
         new = {"name": mesh.get("name", ""), "primitives": prims}
         if "weights" in mesh:
@@ -86,7 +133,7 @@ class SceneBuilder:
         self._mesh_cache[ck] = len(self.doc["meshes"]) - 1
         return self._mesh_cache[ck]
 
-    def _copy_mappings(self, key: str, src: dict, mappings: list[dict]) -> list[dict]:
+    def _copy_mappings(self, key: str, src: dict, src_bin: bytes, mappings: list[dict]) -> list[dict]:
         """A primitive's variant mappings with the scene's material and variant indices."""
         names = [v["name"] for v in src.get("extensions", {}).get("KHR_materials_variants", {}).get("variants", [])]
         out = []
@@ -96,7 +143,7 @@ class SceneBuilder:
                 if names[i] not in self.variants:
                     self.variants.append(names[i])
                 variants.append(self.variants.index(names[i]))
-            out.append({"material": self._copy_material(key, src, m["material"]), "variants": variants})
+            out.append({"material": self._copy_material(key, src, src_bin, m["material"]), "variants": variants})
         self.used_ext.add("KHR_materials_variants")
         return out
 
@@ -169,7 +216,7 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
     visuals = []
     for (asset_id, lod), members in sorted(groups.items()):
         doc = sources[asset_id][0]
-        poses = glb.to_y_up(np.array([pl.pose for pl in members]))  # (k, 4, 4)
+        poses = glb.to_y_up(np.array([placing.scaled_pose(pl) for pl in members]))  # (k, 4, 4)
         for ni, local in glb.visual_nodes(doc):
             chain = glb.lod_meshes(doc, ni)[lod:] or glb.lod_meshes(doc, ni)[-1:]
             morphs = any("targets" in p for p in doc["meshes"][chain[0]]["primitives"])
@@ -225,7 +272,7 @@ def write(path: Path, *, models: Path, placed: list[Placed], terrain_model: str,
                             "height_m": float(origin_llh[2])}}
     sb.doc["extensionsUsed"] = sorted(sb.used_ext)
     sb.doc["buffers"] = [{"byteLength": glb.padded_length(sb.buffer.binary)}]
-    for key in ("materials", "meshes"):
+    for key in ("materials", "textures", "images", "samplers", "meshes"):
         if not sb.doc[key]:
             del sb.doc[key]
     glb.write(path, sb.doc, bytes(sb.buffer.binary))

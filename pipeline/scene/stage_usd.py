@@ -73,6 +73,7 @@ def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, pla
     # a prim spec and three attribute specs a placement, tens of thousands on a large
     # plan: the loop keeps to what Sdf needs, the numbers converted for all at once
     op_order = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ"])
+    scaled_order = Vt.TokenArray(["xformOp:translate", "xformOp:rotateZ", "xformOp:scale"])  # insert_scale = "apply"
     double3, double, tokens = Sdf.ValueTypeNames.Double3, Sdf.ValueTypeNames.Double, Sdf.ValueTypeNames.TokenArray
     varying, uniform = Sdf.VariabilityVarying, Sdf.VariabilityUniform
     placed = sorted(placed, key=lambda p: p.placement.tag)
@@ -86,7 +87,9 @@ def write(path: Path, *, site_name: str, models: Path, origin_llh, crs: str, pla
         prim.instanceable = p.asset_id not in articulated
         Sdf.AttributeSpec(prim, "xformOp:translate", double3, varying).default = Gf.Vec3d(*position)
         Sdf.AttributeSpec(prim, "xformOp:rotateZ", double, varying).default = yaw_deg
-        Sdf.AttributeSpec(prim, "xformOpOrder", tokens, uniform).default = op_order
+        if p.scale != 1.0:
+            Sdf.AttributeSpec(prim, "xformOp:scale", double3, varying).default = Gf.Vec3d(p.scale, p.scale, p.scale)
+        Sdf.AttributeSpec(prim, "xformOpOrder", tokens, uniform).default = scaled_order if p.scale != 1.0 else op_order
         data = {"tag": p.tag, "asset": p.asset_id, "level": p.level}
         if p.state:
             data["state"] = p.state

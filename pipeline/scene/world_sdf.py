@@ -10,12 +10,19 @@ and groups the rest:
 
 - an <include> of the placement's LOD variant for an articulated asset (its joints
   move) or one a state binding drives (the runtime swaps the include's URI);
+- a placement drawn scaled ([floorplan] insert_scale = "apply") cannot be an include
+  (SDF has no scale on one): it is a grouped model of its own, named by its TAG;
 - every other placement of a package variant goes into one static model named after
   the variant, with one link: the placement is a <frame> named by its TAG at its pose
-  (the same pose an include would have), and the variant's visuals and collisions,
-  named `<TAG>__<name>` (`<TAG>__<link>__<name>` for a model of several links, whose
-  joints stay at rest, as in any static model), are posed relative to it: a copy of
-  the variant's model.sdf content, meshes still model://<asset>/meshes/....
+  (the same pose an include would have) and draws, posed relative to it, one <visual>
+  `<TAG>__whole` of the package's whole model at its LOD (every visual of every link at
+  rest, one submesh per material) and one <collision> `<TAG>__collision` of all its
+  collision meshes: sdformat spends about 160 kB on each <visual> or <collision>
+  (tools/gzprobe), and a site's thousands of placements fit only with one of each.
+  A package without whole meshes (written before them) gets a copy of each of the
+  variant's visuals and collisions, named `<TAG>__<name>` (`<TAG>__<link>__<name>`
+  for a model of several links). A scaled placement's elements are posed at the
+  scaled offsets and their geometry scaled (mesh <scale>, box, cylinder, sphere).
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ import numpy as np
 from lxml import etree
 
 from .. import safe_xml
-from ..export.names import fmt, lod_model_name
+from ..export.names import WHOLE_COLLISION_FILE, fmt, lod_model_name, whole_mesh_file
 from ..geometry.transform import matrix_to_xyz_rpy, xyz_rpy_to_matrix
 from .placements import Placed
 
@@ -88,9 +95,13 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     _text(inc, "static", "true")
 
     groups: dict[str, list[Placed]] = {}
+    collisions: set = set()  # (asset, scale, pose) of the whole collisions already in the world
     for pl in sorted(placed, key=lambda p: p.placement.tag):
         variant = lod_model_name(pl.placement.asset_id, pl.lod)
-        if pl.placement.asset_id in own_model:
+        if pl.placement.scale != 1.0:
+            world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag,
+                                       collisions=collisions))
+        elif pl.placement.asset_id in own_model:
             inc = etree.SubElement(world, "include")
             _text(inc, "uri", f"model://{variant}")
             _text(inc, "name", pl.placement.tag)
@@ -100,7 +111,7 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         else:
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
-        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members))
+        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, collisions=collisions))
     for model in extra_models:
         world.append(model)
     data = etree.tostring(sdf, pretty_print=True, xml_declaration=True, encoding="UTF-8")
@@ -118,26 +129,64 @@ def _pose_text(matrix: np.ndarray) -> str:
     return " ".join(fmt(v) for v in (*xyz.tolist(), *rpy.tolist()))
 
 
-def grouped_model(variant: str, model_sdf: Path, members: list[Placed]) -> etree._Element:
-    """One static model with one link: per member placement a frame named by its TAG at
-    its pose, and the variant's visuals and collisions posed relative to that frame."""
+def _scale_geometry(item, s: float) -> None:
+    """An SDF visual's or collision's geometry drawn `s` times its size (uniform)."""
+    geometry = item.find("geometry")
+    if geometry is None:
+        return
+    mesh = geometry.find("mesh")
+    if mesh is not None:
+        scale = mesh.find("scale")
+        old = [float(v) for v in scale.text.split()] if scale is not None else [1.0, 1.0, 1.0]
+        if scale is None:
+            scale = etree.SubElement(mesh, "scale")
+        scale.text = " ".join(fmt(v * s) for v in old)
+    for path in ("box/size", "cylinder/radius", "cylinder/length", "sphere/radius", "capsule/radius",
+                 "capsule/length", "ellipsoid/radii"):
+        for el in geometry.findall(path):
+            el.text = " ".join(fmt(float(v) * s) for v in el.text.split())
+
+
+def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None,
+                  collisions: set | None = None) -> etree._Element:
+    """One static model (named `name`, default the variant) with one link: per member
+    placement a frame named by its TAG at its pose, and what it draws posed relative to
+    that frame, at the placement's scale: the package's whole model at the variant's
+    LOD and all its collision meshes, one <visual> and one <collision> (`<TAG>__whole`,
+    `<TAG>__collision`), when the package has them (export.collada._write_whole); else
+    a copy of each of the variant's visuals and collisions. `collisions`: the whole
+    collisions already in the world (asset, scale, pose to 1 um and 1 nrad), shared by
+    every call for one world: a placement that would repeat one exactly (devices piled
+    on one insertion point) adds no second, which physics would only test against the
+    first at every step."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
     source_links = source.findall("link")
-    model = etree.Element("model", name=variant)
+    model = etree.Element("model", name=name or variant)
     _text(model, "static", "true")
     link = etree.SubElement(model, "link", name=GROUPED_LINK)
+    models = Path(model_sdf).parent.parent
     for pl in members:
         tag = pl.placement.tag
         x, y, z = pl.pose[:3, 3]
         frame = etree.Element("frame", name=tag, attached_to=GROUPED_LINK)
         _text(frame, "pose", " ".join(fmt(v) for v in (x, y, z, 0.0, 0.0, pl.yaw)))
         model.append(frame)
+        collides = any(sl.find("collision") is not None for sl in source_links)
+        if collides and collisions is not None:
+            key = (pl.placement.asset_id, pl.placement.scale, *np.round(pl.pose[:3, 3], 6).tolist(), round(pl.yaw, 9))
+            collides = key not in collisions
+            collisions.add(key)
+        whole = _whole_elements(models, pl, collides)
+        if whole is not None:
+            for item in whole:
+                link.append(item)
+            continue
         for source_link in source_links:
             # names are unique within a link: with several links, the link's name too
             prefix = tag + GROUPED_SEPARATOR
             if len(source_links) > 1:
                 prefix += source_link.get("name") + GROUPED_SEPARATOR
-            for kind in ("visual", "collision"):
+            for kind in ("visual", "collision") if collides else ("visual",):
                 for el in source_link.findall(kind):
                     item = copy.deepcopy(el)
                     item.set("name", prefix + el.get("name"))
@@ -146,6 +195,34 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed]) -> etree
                         pose = etree.Element("pose")
                         item.insert(0, pose)
                     pose.set("relative_to", tag)
-                    pose.text = _pose_text(_pose_of(source_link) @ _pose_of(el))
+                    offset = _pose_of(source_link) @ _pose_of(el)
+                    if pl.placement.scale != 1.0:
+                        offset[:3, 3] *= pl.placement.scale
+                        _scale_geometry(item, pl.placement.scale)
+                    pose.text = _pose_text(offset)
                     link.append(item)
     return model
+
+
+def _whole_elements(models: Path, pl: Placed, collides: bool) -> list[etree._Element] | None:
+    """A placement's <visual> of its package's whole model at its LOD and <collision> of
+    all its collision meshes (when the variant has any), or None when the package has
+    no whole model at that LOD. Their materials are the meshes' own (COLLADA Phong)."""
+    asset = pl.placement.asset_id
+    visual_file = whole_mesh_file(pl.lod)
+    if not (models / asset / visual_file).is_file():
+        return None
+    items = [("visual", f"{pl.placement.tag}{GROUPED_SEPARATOR}whole", visual_file)]
+    if collides:
+        if not (models / asset / WHOLE_COLLISION_FILE).is_file():
+            return None
+        items.append(("collision", f"{pl.placement.tag}{GROUPED_SEPARATOR}collision", WHOLE_COLLISION_FILE))
+    out = []
+    for kind, name, rel in items:
+        item = etree.Element(kind, name=name)
+        _text(item, "pose", "0 0 0 0 0 0").set("relative_to", pl.placement.tag)
+        _text(etree.SubElement(etree.SubElement(item, "geometry"), "mesh"), "uri", f"model://{asset}/{rel}")
+        if pl.placement.scale != 1.0:
+            _scale_geometry(item, pl.placement.scale)
+        out.append(item)
+    return out

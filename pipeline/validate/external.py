@@ -41,16 +41,17 @@ _COLLADA_HINT = "pip install pycollada lxml (project dependencies: reinstall the
 _SDFORMAT_LIBRARY = "libsdformat12.so.12"
 _GLTF_MODULE = Path(__file__).resolve().parents[2] / "tools" / "node_modules" / "gltf-validator"
 _TIMEOUT_S = 300
-# Loading the COLLADA schema is slow: keep one validator per thread (a validator's
-# error log is per instance, so threads must not share one).
+# Loading the COLLADA schema is slow: keep one per thread (a schema's error log is per
+# instance, so threads must not share one).
 _LOCAL = threading.local()
-# One schema compiled at a time. lxml finds the resolver that serves the schema's import
-# of xml.xsd (pycollada's local copy) through the parser state it keeps while compiling;
-# with compiles side by side in the report's threads, a schema now and then came out
-# without it ("xml:base does not resolve"), so the first file that thread checked
-# failed and the same files passed in the next run (tests/test_report.py, twice in
-# full test runs; not reproduced on demand, so no test shows this lock's effect).
-_SCHEMA_LOCK = threading.Lock()
+# The schema imports xml.xsd from w3.org; pycollada serves its local copy through an lxml
+# resolver. lxml reaches a resolver through libxml2's entity loader, one per process,
+# which every parse in any thread sets on entry and puts back on exit: a parse that ended
+# in another thread while a schema compiled put back libxml2's own loader, the import
+# went unanswered, and the compile failed with "xml:base does not resolve" (a report's
+# first COLLADA file failed, and passed on rerun). The import names the local copy's
+# file instead, which any loader opens.
+_XML_XSD_URL = "http://www.w3.org/2001/03/xml.xsd"
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -453,7 +454,7 @@ def collada_schema(path: Path) -> ExternalResult:
     resolution, DTD loading or network access (a .dae is untrusted input)."""
     name = "pycollada ColladaValidator"
     try:
-        from collada.schema import ColladaValidator
+        import collada.schema  # noqa: F401 - the schema's files are pycollada's
     except ImportError as e:
         return _skipped(name, path, f"pycollada not importable: {e}", _COLLADA_HINT)
     try:
@@ -464,24 +465,36 @@ def collada_schema(path: Path) -> ExternalResult:
         # COLLADA needs no DTD; one here can only declare entities (XXE, billion laughs).
         return ExternalResult(name, str(path), "failed",
                               ("document declares a DOCTYPE; entities are not resolved",), _COLLADA_HINT)
-    validator = getattr(_LOCAL, "collada", None)
+    schema = getattr(_LOCAL, "collada", None)
     try:
-        if validator is None:
-            with _SCHEMA_LOCK:
-                validator = ColladaValidator()
-                validator.COLLADA_SCHEMA_1_4_1_INSTANCE  # compiled here, under the lock
-            _LOCAL.collada = validator
-    except etree.Error as e:
+        if schema is None:
+            schema = _LOCAL.collada = _collada_schema_instance()
+    except (OSError, etree.Error) as e:
         return ExternalResult(name, str(path), "failed", (f"the COLLADA schema did not compile: {e}",),
                               _COLLADA_HINT)
     try:
-        if validator.validate(tree):
+        if schema.validate(tree):
             return ExternalResult(name, str(path), "passed", (), _COLLADA_HINT)
     except etree.Error as e:  # lxml raises on trees it cannot validate at all
         return ExternalResult(name, str(path), "failed", (f"schema validation error: {e}",), _COLLADA_HINT)
-    log = validator.COLLADA_SCHEMA_1_4_1_INSTANCE.error_log
-    messages = tuple(f"line {e.line}: {e.message}" for e in log) or ("schema validation failed",)
+    messages = tuple(f"line {e.line}: {e.message}" for e in schema.error_log) or ("schema validation failed",)
     return ExternalResult(name, str(path), "failed", messages, _COLLADA_HINT)
+
+
+def _collada_schema_instance() -> etree.XMLSchema:
+    """pycollada's COLLADA 1.4.1 schema, compiled with its xml.xsd import pointing at
+    pycollada's own copy on disk: no resolver, no network, whatever loader is set."""
+    from importlib import resources
+
+    folder = resources.files("collada").joinpath("resources")
+    xml_xsd = Path(str(folder.joinpath("xsd.xml")))
+    if not xml_xsd.is_file():
+        raise OSError(f"pycollada's copy of xml.xsd is not a file: {xml_xsd}")
+    text = folder.joinpath("schema-1.4.1.xml").read_bytes()
+    if text.count(_XML_XSD_URL.encode()) != 1:
+        raise OSError(f"pycollada's COLLADA schema does not import {_XML_XSD_URL} once")
+    text = text.replace(_XML_XSD_URL.encode(), xml_xsd.as_uri().encode())
+    return etree.XMLSchema(etree.fromstring(text, safe_xml.parser()))
 
 
 def _skipped(validator: str, path: Path, why: str, hint: str) -> ExternalResult:

@@ -134,19 +134,6 @@ def _merged(parts: list[dict]) -> list[dict]:
     return merged
 
 
-def texture_refs(node, out: list[dict]) -> None:
-    """Every {"index": ...} texture reference inside a material, in document order."""
-    if isinstance(node, dict):
-        for k in sorted(node):
-            v = node[k]
-            if k.endswith("Texture") and isinstance(v, dict) and "index" in v:
-                out.append(v)
-            texture_refs(v, out)
-    elif isinstance(node, list):
-        for v in node:
-            texture_refs(v, out)
-
-
 def _copy_materials(pack: Pack, writer: glb.Buffer, doc: dict, binary: bytes, used: list[int]) -> dict[int, int]:
     """The source materials `used` (indices) into the pack, with the textures, images
     and samplers they reference (images into the pack's binary); returns source ->
@@ -155,7 +142,7 @@ def _copy_materials(pack: Pack, writer: glb.Buffer, doc: dict, binary: bytes, us
     for src in used:
         mat = json.loads(json.dumps(doc["materials"][src]))
         refs: list[dict] = []
-        texture_refs(mat, refs)
+        glb.texture_refs(mat, refs)
         for ref in refs:
             t = ref["index"]
             if t not in textures:

@@ -38,7 +38,7 @@ from .. import glb
 from ..export.names import gltf_file
 from ..files import atomic_write
 from ..scene.placements import yaw_matrix
-from .packs import IMAGES, Pack, make_pack, texture_refs
+from .packs import IMAGES, Pack, make_pack
 
 TILESET = "tileset.json"
 MIN_CELL_M = 8.0  # no cell smaller: below it, a tile holds about one placement
@@ -193,7 +193,7 @@ def _add_pack(doc: dict, pack: Pack, variants: list[str], used: set[str]) -> int
     for mat in pack.materials:
         mat = json.loads(json.dumps(mat))
         refs: list[dict] = []
-        texture_refs(mat, refs)
+        glb.texture_refs(mat, refs)
         for ref in refs:
             ref["index"] += textures
         used.update(mat.get("extensions", {}))
@@ -293,7 +293,9 @@ def write(out: Path, *, models: Path, record: dict, manifests: dict[str, dict], 
     placements = record["placements"]
     assets = [p["asset"] for p in placements]
     errors = {a: levels_of(manifests[a]) for a in sorted(set(assets))}
-    poses = np.array([yaw_matrix(p["yaw_rad"], p["enu"]) for p in placements]).reshape(-1, 4, 4)
+    # placements.json records "scale" where insert_scale = "apply" drew one (else 1)
+    poses = np.array([yaw_matrix(p["yaw_rad"], p["enu"]) @ np.diag([p.get("scale", 1.0)] * 3 + [1.0])
+                      for p in placements]).reshape(-1, 4, 4)
     packs = packs_of(out, models, {a: manifests[a] for a in errors}, memo)
 
     def shown(a: str, level: int) -> int:

@@ -313,15 +313,16 @@ class Viewer {
     const dx = eyeEnu[0] - rec.enu[0], dy = eyeEnu[1] - rec.enu[1], dz = eyeEnu[2] - rec.enu[2];
     const local = [c * dx + s * dy, -s * dx + c * dy, dz];
     const [lo, hi] = asset.bounds;
+    const k = rec.scale || 1;  // placements.json's scale (insert_scale = "apply"), else 1
     let d2 = 0;
     for (let i = 0; i < 3; i++) {
-      const q = Math.min(Math.max(local[i], lo[i]), hi[i]);
+      const q = Math.min(Math.max(local[i], k * lo[i]), k * hi[i]);
       d2 += (local[i] - q) ** 2;
     }
     const d = Math.sqrt(d2);
     let level = 0;
     asset.errors_m.forEach((e, k) => {
-      const px = d > 0 ? e / (2 * d * Math.tan(hfov / 2)) * widthPx : (e > 0 ? Infinity : 0);
+      const px = d > 0 ? k * e / (2 * d * Math.tan(hfov / 2)) * widthPx : (e > 0 ? Infinity : 0);
       if (px <= this.twin.lod.screen_tolerance_px) level = k;
     });
     return level;
@@ -626,7 +627,9 @@ class Viewer {
     const geometry = new THREE.BoxGeometry(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]);
     geometry.translate((hi[0] + lo[0]) / 2, (hi[1] + lo[1]) / 2, (hi[2] + lo[2]) / 2);
     this.box = new THREE.LineSegments(new THREE.EdgesGeometry(geometry), new THREE.LineBasicMaterial({color: 0xffc000}));
-    const pose = new THREE.Matrix4().makeRotationZ(r.yaw_rad).setPosition(r.enu[0], r.enu[1], r.enu[2]);
+    const k = r.scale || 1;
+    const pose = new THREE.Matrix4().makeRotationZ(r.yaw_rad).setPosition(r.enu[0], r.enu[1], r.enu[2])
+      .multiply(new THREE.Matrix4().makeScale(k, k, k));
     this.box.matrixAutoUpdate = false;
     this.box.matrix.copy(C).multiply(pose);
     this.scene.add(this.box);
