@@ -136,7 +136,7 @@ def test_show_only_hides_exactly_the_other_placements(tmp_path):
         scene.set_instances({"R-1": 1, "R-2": 2})
         when = dt.datetime(2025, 3, 20, 12, tzinfo=dt.timezone.utc)
         scene.set_shot(Shot(when, look_at((0.25, -14.0, 3.0), (0.25, -2.0, 0.5)), camera_model.lens(1.0), 1.0, 1.0,
-                            800.0), None)
+                            800.0))
 
         def seen():  # what a render shows: its instance ids
             ids, _ = scene.render_labels()
