@@ -6,20 +6,18 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 
+from helpers import SOURCES, twin
 from pipeline.perception import gauge_reader as bl
 from pipeline.perception.baseline import BINS, bin_of, write_report
 from pipeline.perception.gauge import DIAL_RADIUS, FACE_RADIUS, POINTER, pointer_angle
 from pipeline.geometry.pinhole import intrinsics, look_at, project
 
-ROOT = Path(__file__).resolve().parent.parent
 
 # the reactor's main-tank pointer binding as its manifest records it
 REST = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, -1.78], [0.0, 1.0, 0.0, 2.8], [0.0, 0.0, 0.0, 1.0]])
@@ -230,12 +228,11 @@ def close_dataset(sample_build, tmp_path_factory) -> Path:
         (out / sub).symlink_to(sample_build / sub)
     config = out.parent / "close.toml"
     config.write_text(CLOSE)
-    return run_dataset(config, out, sources=ROOT / "sources")
+    return run_dataset(config, out, sources=SOURCES)
 
 
 def test_the_baseline_reads_a_rendered_dataset(close_dataset, tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "baseline", str(close_dataset), "--out",
-                           str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=600)
+    proc = twin("baseline", close_dataset, "--out", tmp_path, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     report = json.loads((tmp_path / "reports" / "baseline_close.json").read_text())
     gauges = report["gauges"]

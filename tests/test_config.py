@@ -1,11 +1,10 @@
 """site.toml / asset.toml loading: every error names the file and the key."""
 
-import subprocess
-import sys
 import textwrap
 
 import pytest
 
+from helpers import twin
 from pipeline import config
 from pipeline.errors import UserError
 
@@ -110,8 +109,7 @@ def test_asset_id_that_escapes_is_rejected(tmp_path):
 
 def test_cli_reports_one_line_and_exit_1(tmp_path):
     (tmp_path / "site.toml").write_text(GOOD_SITE.replace("EPSG:31984", "EPSG:999999"))
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "info", "--sources", str(tmp_path)],
-                          capture_output=True, text=True)
+    proc = twin("info", "--sources", tmp_path)
     assert proc.returncode == 1
     assert "Traceback" not in proc.stderr
     lines = [l for l in proc.stderr.splitlines() if l.strip()]

@@ -5,7 +5,6 @@ workers, and leaves no process behind; dask_executor runs any calls the same way
 from __future__ import annotations
 
 import functools
-import hashlib
 import json
 import os
 import shutil
@@ -17,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-import mini_sources
 import toy_graph
+from helpers import ROOT, tree_hashes, twin
 
 try:
     import distributed  # noqa: F401
@@ -32,19 +31,6 @@ import psutil
 from pipeline.builder import run
 from pipeline.engine.dask_executor import BuildExecutor, dask_executor, dask_pool, worn_out
 from pipeline.engine.scheduler import Scheduler
-
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def twin(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], capture_output=True, text=True,
-                          timeout=1200, cwd=ROOT)
-
-
-def tree_hashes(out: Path) -> dict[str, str]:
-    """sha256 of every file a user gets (the cache and state are bookkeeping)."""
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(out.rglob("*")) if p.is_file() and not p.relative_to(out).parts[0].startswith(".")}
 
 
 def children() -> set[int]:
@@ -61,14 +47,10 @@ def _cmdline(process: psutil.Process) -> list[str]:
         return []
 
 
-@pytest.fixture(scope="module")
-def mini(tmp_path_factory):
-    """The mini sources and their build by the local pool."""
-    root = tmp_path_factory.mktemp("dask")
-    sources = mini_sources.make(root / "sources")
-    proc = twin("build", "--sources", sources, "--out", root / "local", "--jobs", "2", "--json")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return sources, root / "local"
+@pytest.fixture(scope="session")
+def mini(mini_build):
+    """The mini sources and their build by the local pool (two jobs)."""
+    return mini_build
 
 
 # --- the build ------------------------------------------------------------------------

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import ROOT, SOURCES, twin
 from pipeline.errors import UserError
 from pipeline.datasets import config as dataset_config
 
-ROOT = Path(__file__).resolve().parent.parent
 
 TINY = """
 [dataset]
@@ -53,11 +53,6 @@ def _config(tmp_path: Path, text: str = TINY) -> Path:
     path = tmp_path / "tiny.toml"
     path.write_text(text)
     return path
-
-
-def _twin(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=1800, **kw)
 
 
 def _scene_copy(build: Path, dst: Path) -> Path:
@@ -100,21 +95,21 @@ def test_a_bad_config_is_one_error_naming_the_file_and_key(tmp_path, edit, key):
 
 
 def test_the_shipped_config_loads():
-    cfg = dataset_config.load(ROOT / "sources" / "datasets" / "inspection_route.toml")
+    cfg = dataset_config.load(SOURCES / "datasets" / "inspection_route.toml")
     assert {c.kind for c in cfg.cameras} == {"route", "inspection_point", "ptz"}
     assert cfg.sensor.width == 640 and cfg.sensor.height == 480 and cfg.count >= 100
 
 
 def test_the_cli_reports_a_bad_config_without_a_traceback(tmp_path):
     path = _config(tmp_path, TINY.replace("count = 4", "count = -1"))
-    proc = _twin("dataset", path, "--out", tmp_path / "build")
+    proc = twin("dataset", path, "--out", tmp_path / "build")
     assert proc.returncode != 0
     assert str(path) in proc.stderr and "dataset.count" in proc.stderr and "Traceback" not in proc.stderr
 
 
 def test_frames_beyond_the_configs_count_are_refused(tmp_path):
     path = _config(tmp_path)
-    proc = _twin("dataset", path, "--out", tmp_path / "build", "--frames", "5")
+    proc = twin("dataset", path, "--out", tmp_path / "build", "--frames", "5")
     assert proc.returncode != 0 and "--frames" in proc.stderr and "count, 4" in proc.stderr
     assert "Traceback" not in proc.stderr
 
@@ -129,9 +124,9 @@ def test_frame_i_is_the_same_whatever_came_before(sample_build, tmp_path):
     from pipeline.runtime.site import load_site
 
     cfg = dataset_config.load(_config(tmp_path, TINY.replace("count = 4", "count = 40")))
-    site = load_site(sample_build, ROOT / "sources")
-    forward = [Planner(cfg, site, ROOT / "sources").plan(i) for i in range(40)]
-    backward = Planner(cfg, site, ROOT / "sources")
+    site = load_site(sample_build, SOURCES)
+    forward = [Planner(cfg, site, SOURCES).plan(i) for i in range(40)]
+    backward = Planner(cfg, site, SOURCES)
     for i in reversed(range(40)):
         p = backward.plan(i)
         assert p.seed == forward[i].seed and p.camera == forward[i].camera
@@ -148,7 +143,7 @@ def tiny_run(sample_build, tmp_path_factory):
     root = tmp_path_factory.mktemp("dataset")
     out = _scene_copy(sample_build, root / "build")
     config = _config(root)
-    proc = _twin("dataset", config, "--out", out)
+    proc = twin("dataset", config, "--out", out)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return config, out / "datasets" / "tiny"
 
@@ -204,7 +199,7 @@ def test_workers_and_executors_give_the_same_bytes(tiny_run, sample_build, tmp_p
     expected = _files(reference)
     for name, args in (("local2", ("--workers", "2")), ("dask2", ("--workers", "2", "--executor", "dask"))):
         out = _scene_copy(sample_build, tmp_path / name)
-        proc = _twin("dataset", config, "--out", out, *args)
+        proc = twin("dataset", config, "--out", out, *args)
         assert proc.returncode == 0, proc.stderr[-3000:]
         got = _files(out / "datasets" / "tiny")
         assert got.keys() == expected.keys(), name
@@ -217,7 +212,7 @@ def test_frames_n_is_a_prefix_and_a_killed_run_resumes_identically(tiny_run, sam
     config, reference = tiny_run
     expected = _files(reference)
     out = _scene_copy(sample_build, tmp_path / "b")
-    proc = _twin("dataset", config, "--out", out, "--frames", "2")
+    proc = twin("dataset", config, "--out", out, "--frames", "2")
     assert proc.returncode == 0, proc.stderr[-3000:]
     folder = out / "datasets" / "tiny"
     first = _files(folder)
@@ -236,7 +231,7 @@ def test_frames_n_is_a_prefix_and_a_killed_run_resumes_identically(tiny_run, sam
     os.killpg(child.pid, signal.SIGKILL)
     child.wait()
     assert not (folder / "records" / "000003.json").exists()
-    proc = _twin("dataset", config, "--out", out)
+    proc = twin("dataset", config, "--out", out)
     assert proc.returncode == 0, proc.stderr[-3000:]
     got = _files(folder)
     assert [k for k in expected if got.get(k) != expected[k]] == [] and got.keys() == expected.keys()
@@ -251,7 +246,7 @@ def test_a_folder_made_by_another_config_is_refused(tiny_run, sample_build, tmp_
 
     shutil.copytree(reference, out / "datasets" / "tiny")
     other = _config(tmp_path, TINY.replace("seed = 11", "seed = 12"))
-    proc = _twin("dataset", other, "--out", out, "--frames", "1")
+    proc = twin("dataset", other, "--out", out, "--frames", "1")
     assert proc.returncode != 0 and "another version of the config" in proc.stderr
     assert _files(out / "datasets" / "tiny") == _files(reference)
 
@@ -266,7 +261,7 @@ def test_frames_render_when_the_calling_process_imported_bpy(sample_build, tmp_p
               "from pipeline.datasets.run import run_dataset; "
               "print(run_dataset(sys.argv[1], Path(sys.argv[2]), frames=1, sources=Path(sys.argv[3])))")
     out = _scene_copy(sample_build, tmp_path / "b")
-    proc = subprocess.run([sys.executable, "-c", script, str(_config(tmp_path)), str(out), str(ROOT / "sources")],
+    proc = subprocess.run([sys.executable, "-c", script, str(_config(tmp_path)), str(out), str(SOURCES)],
                           capture_output=True, text=True, cwd=ROOT, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert (out / "datasets" / "tiny" / "records" / "000000.json").is_file()

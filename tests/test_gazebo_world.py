@@ -13,10 +13,8 @@ import numpy as np
 import pytest
 from lxml import etree
 
-import mini_sources
 from fixtures_assets import articulated_asset, box_mesh, rpy_matrix, tetra_mesh
 from pipeline import ir
-from pipeline.builder.run import build
 from pipeline.export import collada as collada_writer
 from pipeline.export import names
 from pipeline.export import sdf as sdf_writer
@@ -147,13 +145,12 @@ def test_gazebo_reads_merged_meshes_exactly(tmp_path):
 # --- the world ------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def site(tmp_path_factory):
+def site(request):
+    """The run's mini build (mini_sources' defaults: the plan 23 deg off grid north,
+    in metres) as Gazebo loads it."""
     if not gazebo.available() and not os.environ.get("CI"):
         pytest.skip(gazebo.PROBE_HINT)
-    root = tmp_path_factory.mktemp("gzsite")
-    sources = mini_sources.make(root / "sources", rotation_deg=23.0, units=6)
-    out = root / "build"
-    assert not build(sources, out, jobs=2, quiet=True).failed
+    _, out = request.getfixturevalue("mini_build")
     world = next((out / "scene").glob("*.sdf"))
     return out, world, gazebo.probe_world(world, [out / "models"], physics_s=0.2)
 
@@ -180,7 +177,7 @@ def test_gazebo_reads_the_world_meshes_as_written(site):
     assert gazebo.mesh_findings([Path(p) for p in paths], seen["meshes"], str) == []
 
 
-def test_a_grouped_placement_is_where_its_include_would_be(site):
+def test_a_grouped_placement_is_where_its_include_would_be(site, tmp_path):
     """The visual bounds of a placement drawn in a grouped model equal those of its
     variant placed alone at the frame's pose (as an include would place it)."""
     out, world, seen = site
@@ -188,7 +185,7 @@ def test_a_grouped_placement_is_where_its_include_would_be(site):
     model = root.find("world/model")
     frame = model.find("frame")
     tag, pose = frame.get("name"), [float(v) for v in frame.findtext("pose").split()]
-    alone = out / "alone.sdf"
+    alone = tmp_path / "alone.sdf"  # beside the shared build, not in it
     alone.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>model://{model.get("name")}</uri>'
                      f'<name>{tag}</name><pose>{" ".join(map(str, pose))}</pose></include></world></sdf>\n')
     single = gazebo.probe_world(alone, [out / "models"])["models"][0]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from fixtures_assets import box_arrays
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.geometry import clean as C
@@ -13,8 +14,8 @@ from pipeline.geometry import collision, metrics, transform as T, uv
 
 
 def box(offset=0.0):
-    b = trimesh.creation.box((1, 2, 3))
-    return np.asarray(b.vertices) + offset, np.asarray(b.faces, dtype=np.int64)
+    """A 1 x 2 x 3 box centred on (offset, offset, offset)."""
+    return box_arrays((1, 2, 3), (offset,) * 3)
 
 
 def volume(v, f):

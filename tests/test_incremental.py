@@ -15,32 +15,21 @@ import numpy as np
 import pytest
 
 import mini_sources
+from helpers import ROOT, SOURCES, tree_hashes, twin
 from pipeline.bench.builds import nudge_source
 
-ROOT = Path(__file__).resolve().parent.parent
 # what reads the scene: an edit that changes it reruns these too (not viewer:libs)
 AFTER_SCENE = {"viewer", "tiles"}
 
 
-def twin(*args, cwd=None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd, timeout=3000)
-
-
 def explain(sources: Path, out: Path, *extra) -> dict[str, dict]:
-    proc = twin("build", "--sources", sources, "--out", out, "--json", *extra)
+    proc = twin("build", "--sources", sources, "--out", out, "--json", *extra, timeout=3000)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return {e["task"]: e for e in json.loads(proc.stdout)["tasks"]}
 
 
 def ran(tasks: dict[str, dict]) -> set[str]:
     return {name for name, e in tasks.items() if e["ran"]}
-
-
-def tree_hashes(out: Path) -> dict[str, str]:
-    """sha256 of every file a user gets (the cache and state are bookkeeping)."""
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(out.rglob("*")) if p.is_file() and not p.relative_to(out).parts[0].startswith(".")}
 
 
 @pytest.fixture(scope="module")
@@ -124,11 +113,10 @@ def test_noop_edit_and_parameter_change(mini):
     assert tree_hashes(out) == tree_hashes(root / "clean")
 
 
-def test_two_clean_builds_are_byte_identical(mini, tmp_path):
-    sources, _ = mini
-    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+def test_two_clean_builds_are_byte_identical(mini_build, tmp_path):
+    sources, b = mini_build  # a clean build of them with --jobs 2, made once per run
+    a, c = tmp_path / "a", tmp_path / "c"
     explain(sources, a, "--jobs", "1")
-    explain(sources, b, "--jobs", "2")
     explain(sources, c, "--executor", "in-process")  # tasks in the twin process itself
     ha, hb, hc = tree_hashes(a), tree_hashes(b), tree_hashes(c)
     assert ha and ha == hb == hc
@@ -143,11 +131,8 @@ def test_shared_cache_rebuilds_nothing_into_an_empty_folder(mini, tmp_path):
     assert tree_hashes(tmp_path / "one") == tree_hashes(tmp_path / "two")
 
 
-def test_failed_asset_leaves_the_previous_build(mini, tmp_path):
-    sources, _ = mini
-    src = tmp_path / "src"
-    shutil.copytree(sources, src)
-    out = tmp_path / "build"
+def test_failed_asset_leaves_the_previous_build(mini_copy):
+    src, out = mini_copy  # the run's mini build, copied
     explain(src, out)
     before = tree_hashes(out)
     (src / "assets" / "pole" / "pole.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
@@ -158,18 +143,24 @@ def test_failed_asset_leaves_the_previous_build(mini, tmp_path):
 
 
 @pytest.mark.slow
-def test_sample_one_asset_edit_reexports_only_its_chain(tmp_path):
-    """What .ci/run shows: the sample built, one asset's source edited, rebuilt."""
+def test_sample_one_asset_edit_reexports_only_its_chain(sample_build, tmp_path):
+    """What .ci/run shows: the sample built, one asset's source edited, rebuilt. The
+    first build restores every task from the session's sample build's cache (built
+    from a copy of sources/ beside it, so the keys match), as a checkout's does."""
     sources = tmp_path / "sources"
-    shutil.copytree(ROOT / "sources", sources, ignore=shutil.ignore_patterns("authoring"))
+    shutil.copytree(SOURCES, sources, ignore=shutil.ignore_patterns("authoring"))
     out = tmp_path / "build"
-    cache = ROOT / "build" / ".cache" if (ROOT / "build" / ".cache").is_dir() else tmp_path / "cache"
-    explain(sources, out, "--cache", cache)
+    first = explain(sources, out, "--cache", sample_build / ".cache")
+    assert ran(first) == set() and tree_hashes(out) == tree_hashes(sample_build, *_OUTPUTS)
     nudge_source(sources / "assets" / "junction_box" / "junction_box.stl", 0.005)
-    # A cache of its own: the shared one holds the edited asset once this test has run
-    # in this checkout, and a restored task is not a run one.
+    # A cache of its own: the shared one would then hold the edited asset, and a
+    # restored task is not a run one.
     edit = explain(sources, out, "--cache", tmp_path / "edit-cache")
     assert ran(edit) == {"source:junction_box", "geometry:junction_box", "asset:junction_box", "scene"} | AFTER_SCENE
+
+
+# what a build makes (the shared sample build also holds what tests wrote beside it)
+_OUTPUTS = ("models", "scene", "tiles", "viewer")
 
 
 def test_floorplan_memo_is_shared_by_the_planner_and_the_scene_tasks(tmp_path, monkeypatch):
@@ -223,14 +214,11 @@ def test_floorplan_memo_skips_the_dxf_until_it_changes(tmp_path, monkeypatch):
     assert [p.x for p in edited.placements] == [p.x + 1.0 for p in first.placements]
 
 
-def test_no_op_plan_skips_the_config_checks_it_passed_before(mini, tmp_path):
+def test_no_op_plan_skips_the_config_checks_it_passed_before(mini_copy):
     """The planner keeps the keys of passed checks in the build folder: planning again
     imports neither jsonschema nor pyproj; edited content is checked again, and a
     broken edit still gets its one clear error."""
-    sources, _ = mini
-    src = tmp_path / "src"
-    shutil.copytree(sources, src)
-    out = tmp_path / "build"
+    src, out = mini_copy  # the run's mini build, copied
     explain(src, out)
     assert len(json.loads((out / ".checked.json").read_text())) == 1 + 1 + 2  # site schema, CRS, two assets
     probe = ("import sys; from pathlib import Path; from pipeline.builder.tasks import plan; "

@@ -457,22 +457,20 @@ def test_twin_build_says_what_a_source_does_not_carry(tmp_path):
     """The morph's animation reaches the user: a line at the end of twin build, and a
     HIER013 finding in its package's manifest (which twin validate reports)."""
     import json
-    import subprocess
-    import sys
 
     import mini_sources
+    from helpers import twin
 
     src = mini_sources.make(tmp_path / "sources")  # asset_tree's sources folder
     asset_tree(tmp_path, "morph", [CORPUS / "mesh" / "simple_morph" / "SimpleMorph.gltf"],
                'category = "test"\nsource = "SimpleMorph.gltf"\n')
-    twin = [sys.executable, "-m", "pipeline.cli", "build", "--sources", str(src), "--out", str(tmp_path / "out"),
-            "--only", "morph"]
-    proc = subprocess.run(twin, capture_output=True, text=True, timeout=1800)
+    build = ["build", "--sources", src, "--out", tmp_path / "out", "--only", "morph"]
+    proc = twin(*build)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-3000:]
     assert "morph: warning: 1 glTF animations are not carried" in proc.stderr
     manifest = json.loads((tmp_path / "out" / "models" / "morph" / "manifest.json").read_text())
     assert [f["code"] for f in manifest["findings"]["source"] if f["code"] == "HIER013"] == ["HIER013"]
-    bad = subprocess.run([*twin, "--memory-limit", "lots"], capture_output=True, text=True, timeout=300)
+    bad = twin(*build, "--memory-limit", "lots", timeout=300)
     assert bad.returncode == 2 and "--memory-limit" in bad.stderr
 
 

@@ -10,18 +10,15 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 import toy_graph
+from helpers import twin
 from pipeline.engine.executors import in_process
 from pipeline.engine.scheduler import Scheduler
 from pipeline.errors import UserError
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _graph(src: Path, out: Path, **actions) -> list:
@@ -184,11 +181,6 @@ def test_a_task_the_planner_refused_fails_without_running(src, tmp_path):
 # --- twin build on the mini sources ------------------------------------------------------
 
 
-def twin(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=ROOT, timeout=1800)
-
-
 def build_json(src: Path, out: Path, code: int = 0) -> dict:
     proc = twin("build", "--sources", src, "--out", out, "--json")
     assert proc.returncode == code and "Traceback" not in proc.stderr, proc.stderr[-3000:]
@@ -223,22 +215,10 @@ def nudge(path: Path) -> None:
     nudge_source(path, 0.005)
 
 
-@pytest.fixture(scope="module")
-def built(tmp_path_factory) -> tuple[Path, Path]:
-    import mini_sources
-
-    root = tmp_path_factory.mktemp("keep_going")
-    src = mini_sources.make(root / "src")
-    build_json(src, root / "build")
-    return src, root / "build"
-
-
 @pytest.fixture
-def case(built, tmp_path) -> tuple[Path, Path]:
-    src, out = built
-    shutil.copytree(src, tmp_path / "src")
-    shutil.copytree(out, tmp_path / "build", symlinks=True)
-    return tmp_path / "src", tmp_path / "build"
+def case(mini_copy) -> tuple[Path, Path]:
+    """Copies of the mini sources and their build, for one case to break."""
+    return mini_copy
 
 
 def test_one_unreadable_source_fails_its_chain_and_the_rest_builds(case):

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fixtures_assets import box_arrays, box_mesh
 from pipeline import ir
 from pipeline.export import manifest, names
 from pipeline.runtime import graph, nodes, run
@@ -18,24 +19,16 @@ TAG = "R-1"
 ASSET = "tiny_reactor"
 
 
-def box(size=0.1, z=0.0):
-    v = np.array([[x, y, zz] for zz in (0, size) for y in (0, size) for x in (0, size)], dtype=np.float64)
-    v[:, 2] += z
-    f = [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-         [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]]
-    return v, f
-
-
 LAMP_ON_BELOW = 90.0  # % tank level; the 20 s run goes 101 -> 81.8, so the lamp switches once
 
 
 def tiny_asset() -> ir.Asset:
-    v, f = box()
+    v, f = box_arrays((0.1, 0.1, 0.1), (0.05, 0.05, 0.05))  # a 10 cm cube on the origin's corner
     column = ir.Mesh(v, f, shape_keys=(ir.ShapeKey("full", v * [1, 1, 5]),))
     rest = np.eye(4)
     rest[:3, 3] = (0.2, -0.5, 1.0)
     visuals = (
-        ir.Visual("tank", "steel", (ir.Mesh(*box(1.0)),)),
+        ir.Visual("tank", "steel", (box_mesh((1.0, 1.0, 1.0), (0.5, 0.5, 0.5)),)),
         ir.Visual("pointer", "black", (ir.Mesh(v, f),), pose=rest),
         ir.Visual("column", "oil", (column,)),
         ir.Visual("lamp", "lamp_off", (ir.Mesh(v, f),)),

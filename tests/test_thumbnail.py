@@ -8,17 +8,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from fixtures_assets import box_mesh
 from pipeline import ir
 from pipeline.export import thumbnail
-
-BOX_F = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
-         (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
-
-
-def box(size=(1.0, 1.0, 1.0)) -> ir.Mesh:
-    v = np.array([(x, y, z) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)]) * size
-    return ir.Mesh(v, BOX_F)
-
 
 def sphere(nu: int, nv: int, r: float = 1.0) -> ir.Mesh:
     """A UV sphere of 2 * nu * nv triangles (poles included as degenerate ones)."""
@@ -51,7 +43,7 @@ def asset_of(*visuals, materials=(RED, BLUE, GLASS)) -> ir.Asset:
 def simple() -> ir.Asset:
     return asset_of(
         ir.Visual("ball", "red", (sphere(40, 20),), translate(0, 0, 1.2)),
-        ir.Visual("plinth", "blue", (box((3, 3, 0.4)),)),
+        ir.Visual("plinth", "blue", (box_mesh((3, 3, 0.4)),)),
     )
 
 
@@ -80,8 +72,8 @@ def test_rerun_is_byte_identical_and_has_no_metadata(tmp_path):
 
 def test_nearer_surface_wins():
     toward = thumbnail.view_basis()[2]
-    near = ir.Visual("near", "red", (box((1, 1, 1)),), translate(*(toward * 2.0)))
-    far = ir.Visual("far", "blue", (box((1, 1, 1)),))
+    near = ir.Visual("near", "red", (box_mesh((1, 1, 1)),), translate(*(toward * 2.0)))
+    far = ir.Visual("far", "blue", (box_mesh((1, 1, 1)),))
     for order in ((near, far), (far, near)):
         img = thumbnail.render(asset_of(*order), 64).astype(int)
         centre = img[32, 32]
@@ -89,7 +81,7 @@ def test_nearer_surface_wins():
 
 
 def test_transparent_visuals_are_skipped_and_empty_asset_is_white():
-    glass = ir.Visual("cover", "glass", (box((4, 4, 4)),))
+    glass = ir.Visual("cover", "glass", (box_mesh((4, 4, 4)),))
     with_glass = thumbnail.render(asset_of(glass, *simple().link("base").visuals), 64)
     assert np.array_equal(with_glass, thumbnail.render(simple(), 64))
     assert np.all(thumbnail.render(asset_of(glass), 32) == 255)
@@ -98,7 +90,7 @@ def test_transparent_visuals_are_skipped_and_empty_asset_is_white():
 def test_heavy_asset_draws_its_coarsest_lod():
     heavy = sphere(400, 250)  # 200k triangles
     assert heavy.triangle_count > thumbnail.MAX_TRIANGLES
-    lod_box = box((1, 2, 3))
+    lod_box = box_mesh((1, 2, 3))
     both = asset_of(ir.Visual("v", "red", (heavy, lod_box)))
     coarse_only = asset_of(ir.Visual("v", "red", (lod_box,)))
     assert np.array_equal(thumbnail.render(both, 64), thumbnail.render(coarse_only, 64))

@@ -8,7 +8,6 @@ site. In CI (CI=1) a missing browser or node module fails these tests."""
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 import json
 import os
 import re
@@ -27,28 +26,13 @@ from pipeline import glb
 from pipeline.geometry.transform import matrix_from_quaternion
 from pipeline.viewer import check, libs, sun_table, tiles
 
-ROOT = Path(__file__).resolve().parent.parent
+from helpers import SOURCES, tree_hashes, twin
 
 
-def twin(*args, timeout=3000) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
-
-
-def tree_hashes(out: Path, *folders: str) -> dict[str, str]:
-    return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for f in folders for p in sorted((out / f).rglob("*")) if p.is_file()}
-
-
-@pytest.fixture(scope="module")
-def mini(tmp_path_factory):
-    """The mini sources built once: (sources, build)."""
-    root = tmp_path_factory.mktemp("viewer")
-    sources = mini_sources.make(root / "sources")
-    out = root / "build"
-    proc = twin("build", "--sources", sources, "--out", out, "--json")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return sources, out
+@pytest.fixture(scope="session")
+def mini(mini_build):
+    """The mini sources built once per run: (sources, build)."""
+    return mini_build
 
 
 # --- the build's tasks --------------------------------------------------------------
@@ -81,22 +65,20 @@ def test_the_build_writes_the_pages_the_libraries_and_the_tiles(mini):
         assert m["bounds"] == manifest["bounds"]
 
 
-def test_noop_rebuild_runs_nothing_and_builds_are_byte_identical(mini, tmp_path):
-    sources, out = mini
+def test_noop_rebuild_runs_nothing_and_builds_are_byte_identical(mini, mini_copy, tmp_path):
+    _, built = mini
+    sources, out = mini_copy  # the shared build copied: other tests read it meanwhile
     again = json.loads(twin("build", "--sources", sources, "--out", out, "--json").stdout)
     assert {t["task"] for t in again["tasks"] if t["ran"]} == set()
     other = tmp_path / "other"
     proc = twin("build", "--sources", sources, "--out", other, "--json", "--jobs", "1")
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert tree_hashes(out, "viewer", "tiles") == tree_hashes(other, "viewer", "tiles")
+    assert tree_hashes(built, "viewer", "tiles") == tree_hashes(other, "viewer", "tiles")
 
 
-def test_the_libraries_task_runs_only_for_new_libraries(mini, tmp_path):
-    sources, _ = mini
-    src = tmp_path / "src"
-    shutil.copytree(sources, src)
-    out = tmp_path / "build"
-    twin("build", "--sources", src, "--out", out, "--json")
+def test_the_libraries_task_runs_only_for_new_libraries(mini_copy):
+    src, out = mini_copy  # built once: the shared build copied
     (src / "site.toml").write_text((src / "site.toml").read_text() + "\n# edited\n")
     edit = json.loads(twin("build", "--sources", src, "--out", out, "--json").stdout)
     ran = {t["task"] for t in edit["tasks"] if t["ran"]}
@@ -503,15 +485,15 @@ def test_tiles_on_the_globe_land_at_the_site(mini, tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def sample(tmp_path_factory):
-    """The sample built into a scratch folder (tasks restored from the checkout's
-    cache when there) and its oil-leak scenario run."""
-    root = tmp_path_factory.mktemp("sample")
-    out = root / "build"
-    cache = ROOT / "build" / ".cache" if (ROOT / "build" / ".cache").is_dir() else root / "cache"
-    proc = twin("build", "--sources", ROOT / "sources", "--out", out, "--cache", cache, "--json")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    proc = twin("run", ROOT / "sources" / "scenarios" / "oil_leak.toml", "--out", out)
+def sample(sample_build, tmp_path_factory):
+    """The session's sample build with the oil-leak scenario run beside it: a folder
+    linking the build's outputs, its own runs/ (the shared build stays as built)."""
+    out = tmp_path_factory.mktemp("sample") / "build"
+    out.mkdir()
+    for sub in sample_build.iterdir():
+        if sub.name != "runs":
+            (out / sub.name).symlink_to(sub)
+    proc = twin("run", SOURCES / "scenarios" / "oil_leak.toml", "--out", out)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out
 
@@ -551,7 +533,7 @@ def test_sample_in_the_viewer_plays_the_run_as_the_runtime_maps_it(sample):
     assert result["page_errors"] == [] and result["stats"]["errors"] == []
     assert result["stats"]["instances"] == result["stats"]["placements"] == 787
     assert result["stats"]["runs"] == ["oil_leak"]
-    scenario = graph.load_scenario(ROOT / "sources" / "scenarios" / "oil_leak.toml", run.scene_zone(sample))
+    scenario = graph.load_scenario(SOURCES / "scenarios" / "oil_leak.toml", run.scene_zone(sample))
     observed = [o for o in run.load_observed(sample) if o.tag == "RE-A1"]
     data, _ = run.simulate(scenario, observed)
     for k in steps:
