@@ -15,8 +15,11 @@ from typing import Callable
 
 from filelock import FileLock
 
-ROOT = Path(__file__).resolve().parent.parent
-SOURCES = ROOT / "sources"
+ROOT = Path(__file__).resolve().parent.parent  # the checkout
+SOURCES = ROOT / "sources"  # the sample's sources
+TESTS = ROOT / "tests"  # the helpers and fixtures test files import or run as scripts
+DATA = TESTS / "data"  # small hand-made fixtures: bad/ and clean/
+CORPUS = ROOT.parent / "shared" / "corpus"  # public test files beside the checkout, when there
 
 
 def twin(*args, cwd: Path | None = ROOT, timeout: float = 1800) -> subprocess.CompletedProcess:

@@ -13,10 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import SOURCES
 from pipeline.config import load_asset_config
 
-ROOT = Path(__file__).resolve().parent.parent
-SOURCES = ROOT / "sources"
 AUTHORING = SOURCES / "authoring"
 ASSETS = SOURCES / "assets"
 

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import ROOT
 from pipeline.config import load_asset_config
 
-ROOT = Path(__file__).resolve().parent.parent
 AUTHORING = ROOT / "sources" / "authoring"
 ASSETS = ROOT / "sources" / "assets"
 

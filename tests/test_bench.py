@@ -7,17 +7,17 @@ runs every section, writes both files, and that bench.json matches its schema.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import jsonschema
 import numpy as np
 import pytest
 
 import mini_sources
+from helpers import ROOT
 from pipeline.bench import plans, report, sections, stats, summary
 from pipeline.bench.builds import edit_description, nudge_lod_budget
 
-SCHEMA = Path(__file__).resolve().parents[1] / "schemas" / "bench.schema.json"
+SCHEMA = ROOT / "schemas" / "bench.schema.json"
 
 
 def validator():

@@ -12,11 +12,10 @@ import numpy as np
 import pytest
 
 from fixtures_assets import box_mesh
+from helpers import DATA
 from pipeline import ir
 from pipeline.findings import RULES, Finding, finding, mesh_findings
 from pipeline.validate.checks import check_asset, check_package
-
-DATA = Path(__file__).parent / "data"
 
 
 def _load(path: Path, name: str):

@@ -15,11 +15,11 @@ import ezdxf
 import numpy as np
 import pytest
 
+from helpers import ROOT
 from pipeline.config import FloorplanOptions, load_site
 from pipeline.errors import UserError
 from pipeline.ingest.floorplan import points_in_polygon, read_floorplan
 
-ROOT = Path(__file__).resolve().parent.parent
 SOURCES = ROOT / "sources"
 SAMPLE_DXF = SOURCES / "floorplan" / "substation.dxf"
 AUTHORING = SOURCES / "authoring" / "floorplan.py"

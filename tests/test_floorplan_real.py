@@ -17,14 +17,14 @@ import ezdxf.units
 import numpy as np
 import pytest
 
+from helpers import CORPUS, ROOT
 from pipeline import config, ir
 from pipeline.config import FloorplanOptions, load_site
 from pipeline.errors import UserError
 from pipeline.ingest.floorplan import (UNITS, read_floorplan, read_floorplan_memo,
                                        require_placements_and_platforms, scan_floorplan)
 
-ROOT = Path(__file__).resolve().parent.parent
-CORPUS_PLAN = ROOT.parent / "shared" / "corpus" / "dxf" / "architectural_plan_mm.dxf"
+CORPUS_PLAN = CORPUS / "dxf" / "architectural_plan_mm.dxf"
 
 SITE = """
 [site]

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from helpers import SOURCES
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.bench import meshes
@@ -105,14 +106,12 @@ def test_lod_of_touching_cad_parts_adds_no_edge_defect_to_any_part():
     # The sample's STEP insulator: dozens of touching parts simplified as one union.
     # Judged per part, as the validator does, no level may gain a non-manifold or an
     # inconsistently wound edge (the union alone hid them once: 90 GEOM003 findings).
-    from pathlib import Path
-
     from pipeline import config
     from pipeline.builder.geometry_task import asset_steps
     from pipeline.ingest.readers import read_source
     from pipeline.findings import edge_defect_counts
 
-    toml = Path(__file__).parents[1] / "sources/assets/post_insulator/asset.toml"
+    toml = SOURCES / "assets/post_insulator/asset.toml"
     cfg = config.load_asset_config(toml)
     asset = read_source(cfg)
     for _, step in asset_steps(cfg):

@@ -19,8 +19,7 @@ import pytest
 
 import mini_sources
 from helpers import twin
-
-DATA = Path(__file__).parent / "data"
+from helpers import DATA
 
 
 def snapshot(build: Path) -> dict[str, str]:

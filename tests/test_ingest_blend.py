@@ -14,13 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from helpers import CORPUS, ROOT, TESTS
 from pipeline import ir
 from pipeline.config import load_asset_config
 from pipeline.errors import UserError
 from pipeline.ingest.blend import build_mesh, read_blend, read_blend_path, split_rigid
-
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
 
 
 def _has_bpy() -> bool:
@@ -37,7 +35,7 @@ def fx(tmp_path_factory):
     out = tmp_path_factory.mktemp("blend")
     marker = out / "marker"
     run = subprocess.run(
-        [sys.executable, str(HERE / "blend_fixtures.py"), str(out), str(marker)],
+        [sys.executable, str(TESTS / "blend_fixtures.py"), str(out), str(marker)],
         capture_output=True, text=True, timeout=120,
     )
     assert run.returncode == 0, run.stderr[-2000:]
@@ -443,10 +441,10 @@ def test_textures_packed_and_beside_the_file_are_read_outside_ones_warned(fx):
 
 # --- real .blend files: the corpus, units, what is not carried -------------------------------
 
-CORPUS = ROOT.parent / "shared" / "corpus" / "blend"
-ROBOT = CORPUS / "RobotExpressive.blend"
-APPLY = CORPUS / "27_apply_modifier_with_shapekeys.blend"
-corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus")
+BLEND_CORPUS = CORPUS / "blend"
+ROBOT = BLEND_CORPUS / "RobotExpressive.blend"
+APPLY = BLEND_CORPUS / "27_apply_modifier_with_shapekeys.blend"
+corpus = pytest.mark.skipif(not BLEND_CORPUS.is_dir(), reason="needs ../shared/corpus")
 
 
 def blend_tree(root: Path, asset_id: str, src: Path, extra: str = ""):

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from helpers import CORPUS
 from pipeline.errors import UserError
 from pipeline.ingest.cad import read_cad
 from pipeline.ingest.mesh import read_mesh
@@ -101,7 +102,6 @@ def test_bad_files(tmp_path):
 
 # --- real inputs: the corpus, in a sources tree as a user lays it out -------------------
 
-CORPUS = Path(__file__).resolve().parents[2] / "shared" / "corpus"
 corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus")
 
 

@@ -5,19 +5,17 @@ from __future__ import annotations
 import dataclasses
 import json
 import struct
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from fixtures_assets import articulated_asset, box_mesh
+from helpers import ROOT
 from pipeline import config, ir
 from pipeline.builder import irfile
 from pipeline.builder.geometry_task import asset_steps
 from pipeline.ingest.readers import read_source
 from pipeline.errors import UserError
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def _same(a, b, where="asset") -> None:

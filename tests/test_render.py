@@ -2,11 +2,11 @@
 labels, determinism and the study table need the built sample: test_sample.py."""
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import ROOT, SOURCES
 from pipeline.perception import gauge
 from pipeline.geometry import pinhole
 from pipeline.render import sensor, study
@@ -172,12 +172,12 @@ def test_develop_is_the_same_bytes_in_another_process():
     here = {}
     exec(compile(DEVELOP_SCRIPT.replace("print(", "here['sha'] = ("), "develop", "exec"), {"here": here})
     there = subprocess.run([sys.executable, "-c", DEVELOP_SCRIPT], capture_output=True, text=True, timeout=120,
-                           cwd=Path(__file__).resolve().parent.parent)
+                           cwd=ROOT)
     assert there.returncode == 0, there.stderr[-2000:]
     assert there.stdout.strip() == here["sha"]
 
 
-STUDY_TOML = (Path(__file__).resolve().parent.parent / "sources" / "study.toml").read_text()
+STUDY_TOML = (SOURCES / "study.toml").read_text()
 
 
 @pytest.mark.parametrize("old, new, key", [
@@ -202,7 +202,7 @@ def test_a_bad_study_toml_is_one_error_naming_the_file_and_key(tmp_path, old, ne
     text = str(e.value)
     assert "\n" not in text and text.startswith(str(path))
     assert key is None or f"{path}: {key}:" in text
-    assert study.load_study(Path(__file__).resolve().parent.parent / "sources" / "study.toml").target == "RE-B3"
+    assert study.load_study(SOURCES / "study.toml").target == "RE-B3"
 
 
 def test_pointer_angle_follows_binding():

@@ -18,6 +18,7 @@ from click.testing import CliRunner
 from lxml import etree
 
 from fixtures_assets import articulated_asset
+from helpers import DATA, ROOT
 from pipeline.export.package import write_package
 from pipeline.cli import main
 from pipeline.errors import UserError
@@ -26,8 +27,7 @@ from pipeline.validate import external, report
 from pipeline.findings import RULES
 from pipeline.validate.checks import check_asset
 
-DATA = Path(__file__).parent / "data"
-SCHEMA = json.loads((Path(__file__).parents[1] / "schemas" / "report.schema.json").read_text())
+SCHEMA = json.loads((ROOT / "schemas" / "report.schema.json").read_text())
 CHROMIUM = shutil.which("chromium")
 
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from fixtures_assets import box_arrays, box_mesh
+from helpers import SOURCES
 from pipeline import ir
 from pipeline.export import manifest, names
 from pipeline.runtime import graph, nodes, run
@@ -80,7 +81,7 @@ def built(tmp_path_factory):
 
 
 def scenario_file(tmp_path) -> Path:
-    text = (Path(__file__).resolve().parent.parent / "sources" / "scenarios" / "oil_leak.toml").read_text()
+    text = (SOURCES / "scenarios" / "oil_leak.toml").read_text()
     text = text.replace('assets = ["shunt_reactor"]', f'assets = ["{ASSET}"]').replace("duration_s = 60.0", "duration_s = 20.0")
     text = text.split("[[edges]]\nfrom = \"bushing_2.level\"")[0]  # the tiny asset binds no oil_level_b2
     f = tmp_path / "oil_leak.toml"

@@ -4,15 +4,14 @@ study's oil traces (PAPER_NOTES.md)."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import ROOT
 from pipeline.errors import UserError
 from pipeline.runtime import graph, nodes
 
-ROOT = Path(__file__).resolve().parent.parent
 OIL_LEAK = ROOT / "sources" / "scenarios" / "oil_leak.toml"
 
 HEAD = """

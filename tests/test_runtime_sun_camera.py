@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import datetime as dt
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import SOURCES
 from pipeline.runtime import camera, nodes
 from pipeline import sun
 
@@ -215,7 +215,7 @@ def test_the_study_runs_on_the_sites_clock(tmp_path):
     from pipeline.render import study
 
     site = render_site.Site(tmp_path, [], {}, (31.0, 121.0, 0.0), "2025-06-21", zone=ZoneInfo("Asia/Shanghai"))
-    cfg = study.load_study(Path(__file__).resolve().parent.parent / "sources" / "study.toml")
+    cfg = study.load_study(SOURCES / "study.toml")
     times = dict(study.study_times(site, cfg))
     assert times["early_morning"].isoformat() == "2025-06-21T06:45:00+08:00"
     noon = times["solar_noon"]

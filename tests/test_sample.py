@@ -45,7 +45,7 @@ def test_every_used_asset_has_a_package_within_budget(sample):
 @pytest.mark.parametrize("fmt", ["sdf", "usda", "glb"])
 def test_every_sample_pose_matches_independent_pyproj(sample, fmt):
     """All 787 placements, in each format, against the DXF through pyproj alone."""
-    from test_scene_e2e import angle_diff, gltf_poses, independent_poses, sdf_poses, usd_poses
+    from poses import angle_diff, gltf_poses, independent_poses, sdf_poses, usd_poses
 
     truth = independent_poses(SOURCES)
     reader = {"sdf": sdf_poses, "usda": usd_poses, "glb": gltf_poses}[fmt]

@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 
 import toy_graph
-
-HERE = Path(__file__).parent
+from helpers import ROOT, TESTS
 
 
 def test_cold_then_noop(src, tmp_path):
@@ -152,8 +151,8 @@ def test_any_concurrent_futures_executor_runs_the_graph(src, tmp_path, jobs):
 
 
 def _run_script(src, out, delay):
-    env = dict(os.environ, PYTHONPATH=f"{HERE}{os.pathsep}{HERE.parent}")
-    return subprocess.Popen([sys.executable, str(HERE / "toy_graph.py"), str(src), str(out), str(delay)],
+    env = dict(os.environ, PYTHONPATH=f"{TESTS}{os.pathsep}{ROOT}")
+    return subprocess.Popen([sys.executable, str(TESTS / "toy_graph.py"), str(src), str(out), str(delay)],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
 
@@ -301,7 +300,7 @@ def test_init_worker_in_a_main_process_keeps_its_exit_code():
     """Workers skip the interpreter's exit clean-up (os._exit); a main process that
     calls init_worker (a test does) must still exit with its own code."""
     code = "import sys; from pipeline.engine.worker import init_worker; init_worker(1); sys.exit(3)"
-    proc = subprocess.run([sys.executable, "-c", code], cwd=HERE.parent, timeout=120)
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, timeout=120)
     assert proc.returncode == 3
 
 

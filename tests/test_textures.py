@@ -16,6 +16,7 @@ from lxml import etree
 from PIL import Image
 
 from fixtures_assets import box_mesh
+from helpers import CORPUS
 from pipeline import ir
 from pipeline.export import names
 from pipeline.export.package import write_package
@@ -150,7 +151,6 @@ def test_the_thumbnail_shows_the_texture():
 
 # --- real inputs: textures read from the corpus reach the outputs ---------------------
 
-CORPUS = Path(__file__).resolve().parents[2] / "shared" / "corpus"
 corpus = pytest.mark.skipif(not CORPUS.is_dir(), reason="needs ../shared/corpus")
 
 
