@@ -48,7 +48,7 @@ _LOCAL = threading.local()
 # of xml.xsd (pycollada's local copy) through the parser state it keeps while compiling;
 # with compiles side by side in the report's threads, a schema now and then came out
 # without it ("xml:base does not resolve"), so the first file that thread checked
-# failed and the same files passed in the next run (tests/test_report.py, twice in
+# failed and the same files passed in the next run (tests/validate/test_report.py, twice in
 # full test runs; not reproduced on demand, so no test shows this lock's effect).
 _SCHEMA_LOCK = threading.Lock()
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")

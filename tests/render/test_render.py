@@ -1,5 +1,5 @@
 """Renderer: camera geometry and the phone camera model without Blender. Frames,
-labels, determinism and the study table need the built sample: test_sample.py."""
+labels, determinism and the study table need the built sample: tests/test_sample.py."""
 
 import math
 
