@@ -35,8 +35,12 @@ scene: $(STAMP) $(TOOLS)
 validate: $(STAMP)
 	$(BIN)/twin validate --sources $(SOURCES) --out $(OUT)
 
+# The suite on every core (pytest-xdist); tests that share a costly module fixture
+# run on one worker together (their xdist_group marks), the others one by one.
+TEST_WORKERS ?= auto
+
 test: $(STAMP) $(TOOLS)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
 bench: $(STAMP) $(TOOLS)
 	$(BIN)/twin bench --sources $(SOURCES) --out $(OUT)

@@ -1,4 +1,4 @@
-"""Authors the small .blend fixtures of tests/test_ingest_blend.py.
+"""Authors the small .blend fixtures of tests/ingest/test_ingest_blend.py.
 
 Run in a subprocess (a clean Blender state): python blend_fixtures.py OUT_DIR MARKER
 MARKER is a path prefix the hostile file's driver and text block would write to.

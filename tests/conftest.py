@@ -1,25 +1,62 @@
-"""Fixtures shared across test files."""
+"""Fixtures shared across test files. The sample's build and the mini sources' build
+are made once per test run (once across pytest-xdist's workers, helpers.made_once),
+in the run's temporary folder, never the repository's build/; tests read them and
+copy or link what they change."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
+import shutil
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from helpers import ROOT, SOURCES, made_once, twin
+
+CODE = ROOT / "pipeline"
+
+
+def _build(sources: Path, out: Path, *args: str) -> None:
+    proc = twin("build", "--sources", sources, "--out", out, "--json", *args, timeout=3600)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-4000:]
 
 
 @pytest.fixture(scope="session")
 def sample_build(tmp_path_factory) -> Path:
-    """The sample substation built once per session into a temporary folder (never
-    the repo's build/): the tests that render, label or validate it share it."""
-    out = tmp_path_factory.mktemp("sample") / "build"
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "build", "--sources", str(ROOT / "sources"),
-                           "--out", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=3600)
-    assert proc.returncode == 0, proc.stderr[-4000:]
-    return out
+    """The sample substation built once per run: the tests that render, label,
+    validate or view it share it. Built from a copy of sources/ beside it, as a
+    checkout's build/ is (a task's key holds its inputs' paths relative to the build
+    folder: a copy of both folders side by side finds the build's cache entries)."""
+    def make(folder: Path) -> None:
+        shutil.copytree(SOURCES, folder / "sources")
+        _build(folder / "sources", folder / "build")
+
+    return made_once(tmp_path_factory, "sample", [SOURCES, CODE], make) / "build"
+
+
+@pytest.fixture(scope="session")
+def mini_build(tmp_path_factory) -> tuple[Path, Path]:
+    """The mini sources (tests/mini_sources.py, their defaults) and their build by the
+    local pool with two jobs, made once per run: (sources, build), side by side as
+    src/ and build/. Never edit them: copy both to src/ and build/ of one folder (the
+    tasks' keys stay the same), or build elsewhere."""
+    import mini_sources
+
+    def make(folder: Path) -> None:
+        mini_sources.make(folder / "src")
+        _build(folder / "src", folder / "build", "--jobs", "2")
+
+    folder = made_once(tmp_path_factory, "mini", [Path(mini_sources.__file__), CODE], make)
+    return folder / "src", folder / "build"
+
+
+@pytest.fixture
+def mini_copy(mini_build, tmp_path) -> tuple[Path, Path]:
+    """Copies of the mini sources and their build, side by side as the originals are
+    (tmp_path/src, tmp_path/build), for a test to edit and build again."""
+    src, out = mini_build
+    shutil.copytree(src, tmp_path / "src")
+    shutil.copytree(out, tmp_path / "build", symlinks=True)
+    return tmp_path / "src", tmp_path / "build"
 
 
 @pytest.fixture
@@ -30,3 +67,31 @@ def src(tmp_path) -> Path:
     (d / "a.txt").write_text("alpha")
     (d / "b.txt").write_text("beta")
     return d
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """For pytest-xdist's --dist loadgroup (make test): the tests that share a module's
+    fixture (one of its parameters, when it has them) run on one worker, so that it is
+    made once; the others are spread one by one. Before xdist reads the marks."""
+    for item in items:
+        info = getattr(item, "_fixtureinfo", None)
+        if info is None:
+            continue
+        shared = []
+        for name in sorted(info.name2fixturedefs):
+            if info.name2fixturedefs[name][-1].scope not in ("module", "class", "package"):
+                continue
+            spec = getattr(item, "callspec", None)
+            shared.append(f"{name}[{spec.indices[name]}]" if spec is not None and name in spec.params else name)
+        if shared:
+            item.add_marker(pytest.mark.xdist_group(f"{item.module.__name__}:{'+'.join(shared)}"))
+    # The costly first, the quick ones last to fill the gaps: what needs the sample
+    # build (it starts at once), then the tests that share a module fixture.
+    items.sort(key=_cost_rank)
+
+
+def _cost_rank(item) -> int:
+    if "sample_build" in getattr(item, "fixturenames", ()):
+        return 0
+    return 1 if item.get_closest_marker("xdist_group") else 2

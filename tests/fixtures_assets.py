@@ -66,6 +66,13 @@ def box_mesh(size=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0), attributes: bool = Fa
     return ir.Mesh(vertices=verts, faces=faces, normals=norms, uvs=uvs)
 
 
+def box_arrays(size=(1.0, 1.0, 1.0), center=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """box_mesh's corners and faces as plain arrays (float64, int64) for the functions
+    that take arrays, not an ir.Mesh."""
+    m = box_mesh(size, center)
+    return np.array(m.vertices, dtype=np.float64), np.array(m.faces, dtype=np.int64)
+
+
 def tetra_mesh(scale: float = 1.0, center=(0.0, 0.0, 0.0)) -> ir.Mesh:
     """A closed tetrahedron (4 triangles): the coarse LOD of a box."""
     v = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=np.float64) * scale / 2

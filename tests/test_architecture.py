@@ -8,8 +8,9 @@ from __future__ import annotations
 import ast
 from functools import lru_cache
 from pathlib import Path
+from helpers import ROOT
 
-PIPELINE = Path(__file__).resolve().parents[1] / "pipeline"
+PIPELINE = ROOT / "pipeline"
 MAX_LINES = 600
 # What geometry may import from pipeline besides itself: ir and the two modules that
 # stand on nothing in pipeline (ir itself imports digest; errors holds UserError).

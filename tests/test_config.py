@@ -1,12 +1,11 @@
 """site.toml / asset.toml loading: every error names the file and the key."""
 
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import pytest
 
+from helpers import twin
 from pipeline import config
 from pipeline.errors import UserError
 
@@ -113,8 +112,7 @@ def test_asset_id_that_escapes_is_rejected(tmp_path):
 
 def test_cli_reports_one_line_and_exit_1(tmp_path):
     (tmp_path / "site.toml").write_text(GOOD_SITE.replace("EPSG:31984", "EPSG:999999"))
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "info", "--sources", str(tmp_path)],
-                          capture_output=True, text=True)
+    proc = twin("info", "--sources", tmp_path)
     assert proc.returncode == 1
     assert "Traceback" not in proc.stderr
     lines = [l for l in proc.stderr.splitlines() if l.strip()]
@@ -129,8 +127,7 @@ def test_cli_info_counts_the_assets_it_reads_on_stderr(tmp_path):
     import mini_sources
 
     src = mini_sources.make(tmp_path / "src")
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", "info", "--sources", str(src)],
-                          capture_output=True, text=True, timeout=300)
+    proc = twin("info", "--sources", src, timeout=300)
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
     assert re.search(r"reading\s.*\s2/2\s", proc.stderr), proc.stderr  # kiosk and pole
     assert "2/2" not in proc.stdout and "kiosk" in proc.stdout

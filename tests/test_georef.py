@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import ezdxf
 import numpy as np
 import pytest
 from pyproj import Proj, Transformer
 
+from helpers import ROOT, SOURCES
 from pipeline import ir
 from pipeline.bench.georef import bench_georef
 from pipeline.config import load_site
@@ -18,7 +18,7 @@ from pipeline.errors import UserError
 from pipeline.georef import Georeferencer, crs_to_plan, default_origin, plan_to_crs
 from pipeline.ingest.floorplan import read_floorplan
 
-SITE_TOML = Path(__file__).resolve().parent.parent / "sources" / "site.toml"
+SITE_TOML = SOURCES / "site.toml"
 A_WGS84, F_WGS84 = 6378137.0, 1 / 298.257223563
 
 
@@ -235,7 +235,7 @@ def test_headings_do_not_depend_on_what_the_process_ran_before():
         "a = g.headings(xy, hd); b = g.headings(xy, hd)\n"
         "print(int((a != b).sum()), hashlib.sha256(a.tobytes()).hexdigest())\n"
     )
-    root = Path(__file__).resolve().parent.parent
+    root = ROOT
     outs = [subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True, text=True, check=True).stdout
             for _ in range(2)]
     assert outs[0] == outs[1] and outs[0].split()[0] == "0", outs

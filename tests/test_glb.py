@@ -6,15 +6,13 @@ from __future__ import annotations
 import ast
 import math
 import struct
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import ROOT
 from pipeline import glb
 from pipeline.geometry import transform as T
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _doc() -> dict:

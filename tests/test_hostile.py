@@ -2,7 +2,8 @@
 build` in a subprocess must exit 1 with ONE line naming the file and the object, no
 traceback, and leave the previous build's files byte for byte as they were.
 
-Every case starts from the mini sources and a build of them made once per module."""
+Every case starts from copies of the mini sources and the build of them made once per
+run (conftest's mini_build)."""
 
 from __future__ import annotations
 
@@ -17,14 +18,8 @@ from pathlib import Path
 import pytest
 
 import mini_sources
-
-ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(__file__).parent / "data"
-
-
-def twin(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *args], cwd=ROOT, capture_output=True,
-                          text=True, timeout=timeout)
+from helpers import twin
+from helpers import DATA
 
 
 def snapshot(build: Path) -> dict[str, str]:
@@ -34,21 +29,11 @@ def snapshot(build: Path) -> dict[str, str]:
             if p.is_file() and not any(part.startswith(".") for part in p.relative_to(build).parts)}
 
 
-@pytest.fixture(scope="module")
-def baseline(tmp_path_factory) -> tuple[Path, Path]:
-    root = tmp_path_factory.mktemp("baseline")
-    src = mini_sources.make(root / "src")
-    twin("build", "--sources", str(src), "--out", str(root / "build"), "--jobs", "1")
-    return src, root / "build"
-
-
 @pytest.fixture
-def case(baseline, tmp_path):
+def case(mini_copy):
     """(sources, build, snapshot of the build) copies for one hostile case."""
-    src, build = baseline
-    shutil.copytree(src, tmp_path / "src")
-    shutil.copytree(build, tmp_path / "build", symlinks=True)
-    return tmp_path / "src", tmp_path / "build", snapshot(tmp_path / "build")
+    src, build = mini_copy
+    return src, build, snapshot(build)
 
 
 def rejected(proc: subprocess.CompletedProcess, build: Path, before: dict, *words: str) -> str:
@@ -66,7 +51,7 @@ def rejected(proc: subprocess.CompletedProcess, build: Path, before: dict, *word
 
 
 def build(src: Path, out: Path, *extra: str) -> subprocess.CompletedProcess:
-    return twin("build", "--sources", str(src), "--out", str(out), "--jobs", "1", *extra)
+    return twin("build", "--sources", str(src), "--out", str(out), "--jobs", "1", *extra, timeout=300)
 
 
 # --- sources: TOML, CRS, DXF -------------------------------------------------------------
@@ -219,7 +204,7 @@ def test_external_entity_in_a_package_is_not_resolved(tmp_path):
     shutil.copytree(DATA / "bad" / "PKG005" / "crate", out / "models" / "crate")
     secret = "TOP-SECRET-7f3a"
     (out / "xxe_secret.txt").write_text(secret + "\n")  # where the entity points from models/crate/meshes
-    proc = twin("validate", "--sources", str(tmp_path), "--out", str(out))
+    proc = twin("validate", "--sources", str(tmp_path), "--out", str(out), timeout=300)
     assert "Traceback" not in proc.stderr and proc.returncode == 1, proc.stderr
     for p in (out / "reports").iterdir():
         assert secret not in p.read_text(), p.name

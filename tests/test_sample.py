@@ -1,7 +1,6 @@
 """The full sample substation, end to end (slow; CI runs it): build, validate with the
-formats' own validators, run the oil-leak scenario, render frames and the study.
-Builds into the repository's build/ folder, so a later `make scene` finds the work
-done."""
+formats' own validators, run the oil-leak scenario, render frames and the study, on
+the run's one sample build (conftest's sample_build)."""
 
 from __future__ import annotations
 
@@ -11,29 +10,22 @@ import math
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import ROOT, SOURCES, twin
 from pipeline.render import frames, sensor, study
 from pipeline.perception import gauge
 from pipeline.geometry import pinhole
 from pipeline.runtime import site as render_site
 
-ROOT = Path(__file__).resolve().parent.parent
-SOURCES = ROOT / "sources"
 STUDY = study.load_study(SOURCES / "study.toml")
 
 pytestmark = [pytest.mark.slow, pytest.mark.blender]
 
 
-def twin(*args):
-    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], capture_output=True,
-                          text=True, cwd=ROOT, timeout=3600)
-
-
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def sample(sample_build):
     return sample_build
 
@@ -54,9 +46,9 @@ def test_every_used_asset_has_a_package_within_budget(sample):
 @pytest.mark.parametrize("fmt", ["sdf", "usda", "glb"])
 def test_every_sample_pose_matches_independent_pyproj(sample, fmt):
     """All 787 placements, in each format, against the DXF through pyproj alone."""
-    from test_scene_e2e import angle_diff, gltf_poses, independent_poses, sdf_poses, usd_poses
+    from poses import angle_diff, gltf_poses, independent_poses, sdf_poses, usd_poses
 
-    truth = independent_poses(ROOT / "sources")
+    truth = independent_poses(SOURCES)
     reader = {"sdf": sdf_poses, "usda": usd_poses, "glb": gltf_poses}[fmt]
     got = reader(sample / "scene" / f"sample_substation.{fmt}")
     got.pop("terrain", None)
@@ -67,7 +59,7 @@ def test_every_sample_pose_matches_independent_pyproj(sample, fmt):
 
 
 def test_validation_report_has_no_errors(sample):
-    proc = twin("validate", "--sources", ROOT / "sources", "--out", sample)
+    proc = twin("validate", "--sources", SOURCES, "--out", sample, timeout=3600)
     report = json.loads((sample / "reports" / "validation.json").read_text())
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-4000:]
     assert report["summary"]["errors"] == 0
@@ -82,7 +74,7 @@ def test_validation_report_has_no_errors(sample):
 
 
 def test_oil_leak_scenario_runs_on_the_sample(sample):
-    proc = twin("run", ROOT / "sources" / "scenarios" / "oil_leak.toml", "--out", sample)
+    proc = twin("run", SOURCES / "scenarios" / "oil_leak.toml", "--out", sample, timeout=3600)
     assert proc.returncode == 0, proc.stderr[-4000:]
     assert re.search(r"running\s.*\s4/4\s", proc.stderr), proc.stderr  # simulation and appliers, on stderr
     assert json.loads(proc.stdout)["steps"] >= 60  # stdout: the summary alone

@@ -6,7 +6,7 @@ at the site origin over the site's year. Samples are unit vectors towards the su
 ENU (float32, little-endian, (n, 3)); the page interpolates them with the cubic
 through the four nearest samples and normalises, which stays smooth where azimuth
 is not (the zenith, north). `STEP_S` keeps that interpolation within a thousandth
-of a degree of the ephemeris (tests/test_viewer.py measures it in the browser).
+of a degree of the ephemeris (tests/viewer/test_viewer.py measures it in the browser).
 
 The clock: wall times in the site's `[site] timezone` become UTC through the zone's
 offsets over the table's span, taken from Python's zoneinfo, so the page and the

@@ -1,0 +1,157 @@
+"""`twin bench`: a quick smoke run on the mini sources, plus the bench's small pure parts.
+
+Benchmarks are not timed tests: nothing here asserts a speed, only that the harness
+runs every section, writes both files, and that bench.json matches its schema.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jsonschema
+import numpy as np
+import pytest
+
+import mini_sources
+from helpers import ROOT
+from pipeline.bench import plans, report, sections, stats, summary
+from pipeline.bench.builds import edit_description, nudge_lod_budget
+
+SCHEMA = ROOT / "schemas" / "bench.schema.json"
+
+
+def validator():
+    schema = json.loads(SCHEMA.read_text())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    return jsonschema.Draft202012Validator(schema)
+
+
+def test_pareto_front():
+    pts = [(1.0, 5.0), (2.0, 1.0), (3.0, 3.0), (0.5, 9.0), (2.0, 1.0)]
+    assert sections.pareto(pts) == [0, 1, 3, 4]  # (3, 3) is beaten by (2, 1); equal points both stay
+
+
+def test_repeat_respects_bounds_and_budget():
+    calls = []
+    out = stats.repeat(lambda i: calls.append(i) or 5.0, 1, 4, budget_s=0.0)
+    assert out == [5.0] and calls == [0]
+    out = stats.repeat(lambda i: 1.0, 3, 3, budget_s=1e9)
+    assert out == [1.0, 1.0, 1.0]
+    s = stats.summarize([3.0, 1.0, 2.0])
+    assert s == {"median_s": 2.0, "min_s": 1.0, "max_s": 3.0, "repeats": 3}
+
+
+def test_edit_description_changes_only_description(tmp_path):
+    toml = tmp_path / "asset.toml"
+    toml.write_text('category = "kiosk"\ndescription = "old"\nsource = "k.stl"\n[lod]\nbudgets_m = [0.01]\n')
+    edit_description(toml, 'new "quoted"')
+    text = toml.read_text()
+    assert 'description = "new \\"quoted\\""' in text and "old" not in text and "budgets_m" in text
+    bare = tmp_path / "bare.toml"
+    bare.write_text('category = "kiosk"\n[lod]\nbudgets_m = [0.01]\n')
+    edit_description(bare, "added")
+    import tomllib
+
+    assert tomllib.loads(bare.read_text())["description"] == "added"
+
+
+def test_nudge_lod_budget_scales_only_the_coarsest_budget(tmp_path):
+    import tomllib
+
+    toml = tmp_path / "asset.toml"
+    toml.write_text('category = "kiosk"\nsource = "k.stl"\n[lod]\nbudgets_m = [0.004, 0.02]\n[collision]\nmode = "hull"\n')
+    nudge_lod_budget(toml, 1.5)
+    data = tomllib.loads(toml.read_text())
+    assert data["lod"]["budgets_m"] == [0.004, 0.02 * 1.5] and data["collision"] == {"mode": "hull"}
+
+
+def test_repeated_and_unique_plans(tmp_path):
+    from pipeline import config
+    from pipeline.ingest.floorplan import read_floorplan
+
+    src = mini_sources.make(tmp_path / "src")
+    rep = plans.repeated(src, tmp_path / "rep", 3)
+    site = config.load_site(rep / "site.toml")
+    fp = read_floorplan(site.root / site.floorplan)
+    assert len(fp.placements) == 3 * len(mini_sources.PLACEMENTS)
+    assert len(fp.platforms) == 3 * 2
+    assert (rep / "assets").resolve() == (src / "assets").resolve()
+    uniq, chosen = plans.unique_assets(src, tmp_path / "uniq", 1)
+    site = config.load_site(uniq / "site.toml")
+    assert [p.asset_id for p in read_floorplan(site.root / site.floorplan).placements] == chosen == ["kiosk"]
+    scale = plans.at_scale(src, tmp_path / "scale", 20, 7)
+    site = config.load_site(scale / "site.toml")
+    placed = read_floorplan(site.root / site.floorplan).placements
+    assert len(placed) == 20 and len({(p.x, p.y) for p in placed if "-P" in p.tag}) == 1
+    assert sum("-P" in p.tag for p in placed) == 7 and {p.level for p in placed if "-P" in p.tag} == {"L1"}
+    before = (rep / "floorplan" / "plan.dxf").read_bytes()
+    plans.salt_plan(rep / "floorplan" / "plan.dxf", "x")
+    assert (rep / "floorplan" / "plan.dxf").read_bytes() != before
+
+
+def test_summary_tolerates_failed_sections():
+    assert summary.rows({"lod": {"ok": False, "error": "x", "seconds": 0.0}}) == []
+
+
+def test_clean_makes_json_safe():
+    import numpy as np
+
+    got = report.clean({"a": float("nan"), "b": np.float64(2.0), "c": [np.int64(3), float("inf")]})
+    assert got == {"a": None, "b": 2.0, "c": [3, None]}
+    json.dumps(got, allow_nan=False)
+
+
+@pytest.mark.slow
+def test_quick_bench_on_mini_sources(tmp_path):
+    from pipeline.bench import run_bench
+
+    src = mini_sources.make(tmp_path / "src")
+    page = run_bench(src, tmp_path / "build", quick=True)
+    reports = tmp_path / "build" / "reports"
+    assert page == reports / "bench.html"
+    doc = json.loads((reports / "bench.json").read_text())
+    errors = sorted(validator().iter_errors(doc), key=lambda e: list(e.path))
+    assert not errors, [f"{list(e.path)}: {e.message}" for e in errors[:5]]
+    failed = {k: v["error"] for k, v in doc["sections"].items() if not v["ok"]}
+    assert not failed, failed
+    assert {"build", "lod", "georef", "runtime", "sun", "render", "blender", "gltf_transform"} <= set(doc["sections"])
+    assert doc["summary"] and doc["targets"]
+    html = page.read_text()
+    assert html.count("data:image/png;base64,") >= 6 and "Summary" in html
+
+
+def test_resave_source_changes_bytes_not_content(tmp_path):
+    """The bench's 'saved again' edit: new bytes the reader reads as the same mesh."""
+    from pipeline.bench.builds import resave_source
+    from pipeline.ingest.readers import read_source
+    from pipeline import config
+
+    src = mini_sources.make(tmp_path / "src")
+    for asset in ("kiosk", "pole"):
+        cfg = config.load_asset_config(src / "assets" / asset / "asset.toml")
+        before_bytes, before = cfg.source.read_bytes(), read_source(cfg)
+        resave_source(cfg.source)
+        after = read_source(cfg)
+        assert cfg.source.read_bytes() != before_bytes
+        for a, b in zip(before.links, after.links):
+            for va, vb in zip(a.visuals, b.visuals):
+                assert np.array_equal(va.mesh.vertices, vb.mesh.vertices) and np.array_equal(va.mesh.faces, vb.mesh.faces)
+
+
+def test_scale_rows_put_the_sample_and_the_large_plan_side_by_side():
+    from pipeline.bench.builds import _scale_side_rows
+
+    def side(n, seconds, rss, parse_s, parse_mb, rtf):
+        return {"placements": n, "load_avg": [3.5, 3.0, 2.0], "validate": {"seconds": seconds, "maxrss_bytes": rss},
+                "world": {"parse_s": parse_s, "peak_rss_mb": parse_mb}, "physics": {"real_time_factor": rtf},
+                "elements": {"visuals": 10, "collisions": 4}}
+
+    rows = _scale_side_rows({"sides": {"sample": side(787, 20.0, 1.0e9, 3.0, 900.0, 2.0),
+                                       "scale": side(5000, 70.0, 2.5e9, 12.0, 2091.0, 0.25)}})
+    got = {t: (v, lim) for t, v, lim, _ in rows}
+    assert len(rows) == 10 and all("(load 3.5)" in t for t in got)
+    assert got["787 placements (load 3.5): twin validate under 60 s"] == (20.0, 60.0)
+    assert got["5,000 placements (load 3.5): Gazebo world parse under 1.5 GB"] == (2.091, 1.5)
+    assert got["5,000 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (4.0, 1.0)
+    assert got["787 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (0.5, 1.0)
+    assert "10 visuals, 4 collisions" in next(t for t in got if t.startswith("5,000") and "parse under 10 s" in t)

@@ -1,0 +1,287 @@
+"""`twin dataset`: configs, the frame plan, exact labels, and the same bytes whatever
+the executor, the number of workers, --frames or an interruption."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from helpers import ROOT, SOURCES, twin
+from pipeline.errors import UserError
+from pipeline.datasets import config as dataset_config
+
+
+TINY = """
+[dataset]
+name = "tiny"
+seed = 11
+count = 4
+[sensor]
+width = 96
+height = 72
+samples = 1
+render_denoise = ""
+[conditions]
+dates = ["2025-03-20", "2025-06-21"]
+local_time = ["06:00", "18:30"]
+tau_atm = [0.1, 0.4]
+[states]
+oil_level = [20.0, 100.0]
+switch_open = 0.5
+[[cameras]]
+kind = "inspection_point"
+points = ["RE-A1_gauges", "RE-A2_gauges"]
+zoom = [1.0, 6.0]
+[[cameras]]
+kind = "ptz"
+mast = "CAM-1"
+presets = [{ target = "RE-A1", zoom = 8.0 }]
+"""
+
+OUTPUTS = ("coco.json", "frames.jsonl", "dataset.json")
+
+
+def _config(tmp_path: Path, text: str = TINY) -> Path:
+    path = tmp_path / "tiny.toml"
+    path.write_text(text)
+    return path
+
+
+def _scene_copy(build: Path, dst: Path) -> Path:
+    """A build folder holding the sample's packages and scene by symlink: datasets are
+    written beside them without touching the shared build."""
+    dst.mkdir(parents=True)
+    for sub in ("models", "scene"):
+        (dst / sub).symlink_to(build / sub)
+    return dst
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder).as_posix()
+        if p.is_file() and rel != "timings.json":
+            out[rel] = p.read_bytes()
+    return out
+
+
+# --- configs (no rendering) ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda t: t.replace('name = "tiny"', 'name = "../up"'), "dataset.name"),
+    (lambda t: t.replace("count = 4", "count = 0"), "dataset.count"),
+    (lambda t: t.replace('kind = "ptz"', 'kind = "drone"'), "cameras[1].kind"),
+    (lambda t: t.replace("zoom = [1.0, 6.0]", "zoom = [6.0, 1.0]"), "cameras[0].zoom"),
+    (lambda t: t.replace('local_time = ["06:00", "18:30"]', 'local_time = ["6 am", "18:30"]'),
+     "conditions.local_time[0]"),
+    (lambda t: t.replace("switch_open = 0.5", "switch_open = 2"), "states.switch_open"),
+    (lambda t: t.replace('dates = ["2025-03-20", "2025-06-21"]', 'dates = ["2025-02-30"]'), "conditions.dates[0]"),
+])
+def test_a_bad_config_is_one_error_naming_the_file_and_key(tmp_path, edit, key):
+    path = _config(tmp_path, edit(TINY))
+    with pytest.raises(UserError) as e:
+        dataset_config.load(path)
+    assert e.value.file == str(path) or Path(e.value.file) == path
+    assert e.value.obj == key
+
+
+def test_the_shipped_config_loads():
+    cfg = dataset_config.load(SOURCES / "datasets" / "inspection_route.toml")
+    assert {c.kind for c in cfg.cameras} == {"route", "inspection_point", "ptz"}
+    assert cfg.sensor.width == 640 and cfg.sensor.height == 480 and cfg.count >= 100
+
+
+def test_the_cli_reports_a_bad_config_without_a_traceback(tmp_path):
+    path = _config(tmp_path, TINY.replace("count = 4", "count = -1"))
+    proc = twin("dataset", path, "--out", tmp_path / "build")
+    assert proc.returncode != 0
+    assert str(path) in proc.stderr and "dataset.count" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_frames_beyond_the_configs_count_are_refused(tmp_path):
+    path = _config(tmp_path)
+    proc = twin("dataset", path, "--out", tmp_path / "build", "--frames", "5")
+    assert proc.returncode != 0 and "--frames" in proc.stderr and "count, 4" in proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+# --- the plan and the frames (the sample scene) --------------------------------------------------
+
+
+
+@pytest.mark.slow
+def test_frame_i_is_the_same_whatever_came_before(sample_build, tmp_path):
+    from pipeline.datasets.plan import Planner
+    from pipeline.runtime.site import load_site
+
+    cfg = dataset_config.load(_config(tmp_path, TINY.replace("count = 4", "count = 40")))
+    site = load_site(sample_build, SOURCES)
+    forward = [Planner(cfg, site, SOURCES).plan(i) for i in range(40)]
+    backward = Planner(cfg, site, SOURCES)
+    for i in reversed(range(40)):
+        p = backward.plan(i)
+        assert p.seed == forward[i].seed and p.camera == forward[i].camera
+        assert np.array_equal(p.shot.cam_pose, forward[i].shot.cam_pose) and p.shot.when == forward[i].shot.when
+        assert p.oil_levels == forward[i].oil_levels and p.switches == forward[i].switches
+    kinds = {p.camera.split(":")[0] for p in forward}
+    assert kinds == {"inspection_point", "ptz"}
+    assert len({p.seed for p in forward}) == 40
+
+
+@pytest.fixture(scope="module")
+def tiny_run(sample_build, tmp_path_factory):
+    """The tiny config rendered once, one local worker: the reference the others match."""
+    root = tmp_path_factory.mktemp("dataset")
+    out = _scene_copy(sample_build, root / "build")
+    config = _config(root)
+    proc = twin("dataset", config, "--out", out)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return config, out / "datasets" / "tiny"
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_labels_are_exact_and_coco_loads(tiny_run):
+    from pycocotools import mask as rle
+    from pycocotools.coco import COCO
+
+    import cv2
+
+    _, folder = tiny_run
+    coco = COCO(str(folder / "coco.json"))
+    frames = [json.loads(line) for line in (folder / "frames.jsonl").read_text().splitlines()]
+    assert len(frames) == len(coco.dataset["images"]) == 4
+    names = {c["id"]: c["name"] for c in coco.dataset["categories"]}
+    assert "reactor" in names.values() and "terrain" not in names.values()
+    for image, frame in zip(coco.dataset["images"], frames):
+        assert image["file_name"] == frame["image"]
+        masks = cv2.imread(str(folder / frame["mask"]), cv2.IMREAD_UNCHANGED)
+        assert masks.dtype == np.uint16 and masks.shape == (72, 96)
+        depth = np.load(folder / frame["depth"])
+        assert depth.dtype == np.float32 and depth.shape == masks.shape
+        # every instance pixel is a surface; background (0) is sky (inf) or ground (finite)
+        assert np.isfinite(depth[masks > 0]).all() and (depth[np.isfinite(depth)] > 0).all()
+        assert frame["camera"]["near"] <= depth[masks > 0].min()
+        anns = coco.loadAnns(coco.getAnnIds(imgIds=image["id"]))
+        ids = sorted(int(v) for v in np.unique(masks) if v)
+        assert sorted(a["instance_id"] for a in anns) == ids  # every instance in the mask has one
+        for a in anns:
+            pixels = masks == a["instance_id"]
+            decoded = rle.decode(a["segmentation"]).astype(bool)
+            assert np.array_equal(decoded, pixels), a["tag"]
+            rows, cols = np.nonzero(pixels)
+            assert a["bbox"] == [cols.min(), rows.min(), cols.max() - cols.min() + 1, rows.max() - rows.min() + 1]
+            assert a["area"] == pixels.sum() == int(rle.area(a["segmentation"]))
+            assert a["iscrowd"] == 0 and a["category_id"] in names
+        k = np.array(frame["camera"]["K"])
+        assert k[0, 2] == 48.0 and k[1, 2] == 36.0 and len(frame["camera"]["pose"]) == 4
+        assert {g["tag"] for g in frame["gauges"]} >= {"RE-A1", "RE-A2"}
+        assert all(0.0 <= g["reading"] <= 100.0 for g in frame["gauges"])
+        # the camera aims at its target's dial: the target is in the frame, and its
+        # gauge is visible whenever the dial's centre pixel is the dial at its depth
+        target = frame["camera"]["target"]
+        assert any(a["tag"] == target for a in anns)
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_workers_and_executors_give_the_same_bytes(tiny_run, sample_build, tmp_path):
+    config, reference = tiny_run
+    expected = _files(reference)
+    for name, args in (("local2", ("--workers", "2")), ("dask2", ("--workers", "2", "--executor", "dask"))):
+        out = _scene_copy(sample_build, tmp_path / name)
+        proc = twin("dataset", config, "--out", out, *args)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        got = _files(out / "datasets" / "tiny")
+        assert got.keys() == expected.keys(), name
+        assert [k for k in expected if got[k] != expected[k]] == [], name
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_frames_n_is_a_prefix_and_a_killed_run_resumes_identically(tiny_run, sample_build, tmp_path):
+    config, reference = tiny_run
+    expected = _files(reference)
+    out = _scene_copy(sample_build, tmp_path / "b")
+    proc = twin("dataset", config, "--out", out, "--frames", "2")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    folder = out / "datasets" / "tiny"
+    first = _files(folder)
+    for rel in ("records/000000.json", "images/000001.png", "masks/000001.png", "depth/000001.npy"):
+        assert first[rel] == expected[rel]
+    assert "records/000002.json" not in first
+    frames = (folder / "frames.jsonl").read_text().splitlines()
+    assert frames == (reference / "frames.jsonl").read_text().splitlines()[:2]
+
+    # kill the run of all four frames after its third frame's record lands
+    child = subprocess.Popen([sys.executable, "-m", "pipeline.cli", "dataset", str(config), "--out", str(out)],
+                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 900
+    while not (folder / "records" / "000002.json").exists() and child.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    os.killpg(child.pid, signal.SIGKILL)
+    child.wait()
+    assert not (folder / "records" / "000003.json").exists()
+    proc = twin("dataset", config, "--out", out)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = _files(folder)
+    assert [k for k in expected if got.get(k) != expected[k]] == [] and got.keys() == expected.keys()
+
+
+@pytest.mark.slow
+def test_a_folder_made_by_another_config_is_refused(tiny_run, sample_build, tmp_path):
+    config, reference = tiny_run
+    out = _scene_copy(sample_build, tmp_path / "c")
+    (out / "datasets").mkdir()
+    import shutil
+
+    shutil.copytree(reference, out / "datasets" / "tiny")
+    other = _config(tmp_path, TINY.replace("seed = 11", "seed = 12"))
+    proc = twin("dataset", other, "--out", out, "--frames", "1")
+    assert proc.returncode != 0 and "another version of the config" in proc.stderr
+    assert _files(out / "datasets" / "tiny") == _files(reference)
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_frames_render_when_the_calling_process_imported_bpy(sample_build, tmp_path):
+    """A spawned Blender process inherits its parent's sys.path, which after `import bpy`
+    holds Blender's scripts/modules and its pure-Python `bpy` package (pytest imports bpy
+    in-process for the .blend tests before it gets here)."""
+    script = ("import sys; from pathlib import Path; import bpy; "
+              "from pipeline.datasets.run import run_dataset; "
+              "print(run_dataset(sys.argv[1], Path(sys.argv[2]), frames=1, sources=Path(sys.argv[3])))")
+    out = _scene_copy(sample_build, tmp_path / "b")
+    proc = subprocess.run([sys.executable, "-c", script, str(_config(tmp_path)), str(out), str(SOURCES)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert (out / "datasets" / "tiny" / "records" / "000000.json").is_file()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_run_shows_a_bar_keeps_blenders_log_in_a_file_and_leaves_no_temp_files(sample_build, tmp_path):
+    """The terminal gets a progress bar and the dataset's path, Blender's log (the glTF
+    importer's thousands of lines) goes to OUT/logs/, and the system temp folder keeps
+    nothing: no twin_render_*/frame.exr, no blender_* session folder."""
+    out = _scene_copy(sample_build, tmp_path / "b")
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    proc = twin("dataset", _config(tmp_path), "--out", out, "--frames", "1", env={**os.environ, "TMPDIR": str(temp)})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.strip() == str(out / "datasets" / "tiny")
+    log = out / "logs" / "dataset_tiny.log"
+    assert "Blender create Mesh node" in log.read_text()
+    assert "Blender create" not in proc.stdout + proc.stderr and "INFO" not in proc.stdout + proc.stderr
+    assert "frames" in proc.stderr and "1/1" in proc.stderr  # the bar, done
+    assert str(log) in proc.stderr
+    assert sorted(p.name for p in temp.rglob("*")) == []
