@@ -6,13 +6,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 from lxml import etree
 
+from .. import ir
 from ..export.names import fmt, lod_model_name
 from ..scene import world_sdf
+from ..scene.placements import Placed
 from .context import Context
 
 # Placements per measured world when costing one placement of a variant.
@@ -55,8 +56,9 @@ def _placement_costs(ctx: Context, models: Path, record: dict) -> list[dict]:
     for variant in variants[: ctx.pick(2, len(variants))]:
         poses = [(3.0 * k, 0.0, 0.0, 0.0, 0.0, 0.0) for k in range(_COPIES)]
         included = _world(ctx.work / "inc.sdf", "".join(_include(variant, f"p{k}", pose) for k, pose in enumerate(poses)))
-        # what world_sdf reads of a placement: its tag, position and yaw
-        members = [SimpleNamespace(placement=SimpleNamespace(tag=f"p{k}"), pose=_at(pose[:3]), yaw=0.0)
+        # the placements world_sdf groups: its tag, asset, scale, position and yaw
+        asset = variant.split("__lod")[0]
+        members = [Placed(ir.Placement(f"p{k}", asset, "L1", pose[0], pose[1]), _at(pose[:3]), 0.0)
                    for k, pose in enumerate(poses)]
         model = world_sdf.grouped_model(variant, models / variant / "model.sdf", members)
         grouped = _world(ctx.work / "grp.sdf", etree.tostring(model, encoding="unicode"))

@@ -25,14 +25,11 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
 
 from .context import Context
 from .live import _pcts, _serve, _stop
 
 POLL_S = 0.1
-TANK = "render.reactor_A1.oil_level_tank"
-TANK_MQTT = "render.reactor_A2.oil_level_tank"
 MODEL = """MODEL(IED1){
 LD(LD0){
 LN(LLN0){
@@ -117,12 +114,30 @@ def _until_published(sub, port: str, value: float, timeout: float = 10.0) -> flo
     return None
 
 
+def _targets(build: Path, sources: Path) -> list[tuple[str, tuple[float, float]]]:
+    """Two settable float ports with a range, bound states first (the sample's oil
+    levels; a scene without any has the sun's turbidity and the sky's aerosol)."""
+    from ..live.client import LiveClient
+
+    proc, ep = _serve(build, sources, "--no-render")
+    c = LiveClient(ep["commands"])
+    try:
+        ports = [p for p in c("hello")["ports"] if p["settable"] and p["type"] == "float" and p.get("range")]
+    finally:
+        _stop(proc, c)
+    ports.sort(key=lambda p: (not p["name"].startswith("render."), p["name"]))
+    if len(ports) < 2:
+        raise RuntimeError(f"the twin has {len(ports)} settable float ports, 2 needed")
+    return [(p["name"], tuple(p["range"])) for p in ports[:2]]
+
+
 def _to_twin(build: Path, sources: Path, peers: _Peers, folder: Path, changes: int) -> dict:
     import paho.mqtt.client as mqtt
     import zmq
 
     from ..live.client import LiveClient
 
+    (TANK, iec_range), (TANK_MQTT, mqtt_range) = _targets(build, sources)
     inputs = folder / "inputs.toml"
     inputs.write_text(f"""
 [[signal]]
@@ -146,7 +161,8 @@ target = "{TANK_MQTT}"
         time.sleep(1.0)
         iec, mq, lost = [], [], 0
         for i in range(changes):
-            value = 10.0 + (i % 80) + 0.25
+            frac = 0.1 + 0.8 * (i % 80) / 80.0 + 0.0025  # a new value inside each port's range every time
+            value = iec_range[0] + frac * (iec_range[1] - iec_range[0])
             t0 = time.monotonic()
             peers.ied_float(value)
             t1 = _until_published(sub, TANK, value)
@@ -155,15 +171,16 @@ target = "{TANK_MQTT}"
             else:
                 iec.append((t1 - t0) * 1000.0)
             t0 = time.monotonic()
-            pub.publish("bench/level", str(value + 0.5), qos=1).wait_for_publish(5)
-            t1 = _until_published(sub, TANK_MQTT, value + 0.5)
+            sent = mqtt_range[0] + frac * (mqtt_range[1] - mqtt_range[0])
+            pub.publish("bench/level", repr(sent), qos=1).wait_for_publish(5)
+            t1 = _until_published(sub, TANK_MQTT, sent)
             if t1 is None:
                 lost += 1
             else:
                 mq.append((t1 - t0) * 1000.0)
         return {"poll_period_s": POLL_S, "iec61850_to_published_ms": _pcts(iec),
                 "iec61850_goal_ms": POLL_S * 1000.0 + 100.0, "mqtt_to_published_ms": _pcts(mq),
-                "mqtt_goal_ms": 50.0, "not_seen": lost, "inputs": c("hello")["stats"]["inputs"]["rejected"]}
+                "mqtt_goal_ms": 50.0, "not_seen": lost, "targets": [TANK, TANK_MQTT], "inputs": c("hello")["stats"]["inputs"]["rejected"]}
     finally:
         pub.loop_stop()
         pub.disconnect()

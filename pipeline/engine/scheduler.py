@@ -381,10 +381,11 @@ class Scheduler:
         """A task that ran: its staging folder into the cache, from there into build/."""
         b.suspects.discard(task.name)
         b.report.timings[task.name] = out["seconds"]
+        staging = self.build / ".staging" / task.key  # named by the key it was submitted under
         task.settle(out["result"].get("opened", {}), b.digests)  # what it read enters its key
         if task.opened:
             self.cache.keep_opened(task.base_key, sorted(task.opened))
-        self.cache.put(task.key, self.build / ".staging" / task.key, out["result"])
+        self.cache.put(task.key, staging, out["result"])
         meta = self._place(task, task.key)
         self._finish(b.state, task, b.digests, meta, b.report)
         b.done.add(task.name)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import importlib.util
+import re
 import json
 import shutil
 from pathlib import Path
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 
 from fixtures_assets import box_mesh
-from helpers import DATA
+from helpers import DATA, TESTS
 from pipeline import ir
 from pipeline.findings import RULES, Finding, finding, mesh_findings
 from pipeline.validate.checks import check_asset, check_package
@@ -30,10 +31,13 @@ CLEAN = _load(DATA / "clean" / "assets.py", "clean_assets")
 PKG_CODES = sorted(p.name for p in (DATA / "bad").glob("PKG*"))
 PLACE_CODES = sorted(p.name for p in (DATA / "bad").glob("PLACE*"))
 GZ_CODES = sorted(_load(Path(__file__).with_name("test_gazebo_rules.py"), "gazebo_rules").FIXTURES)
+# the conductor rules' bad cases are spans built in tests/scene/test_clearance.py, each
+# asserted there by its code
+WIRE_CODES = sorted(set(re.findall(r'"(WIRE\d{3})"', (TESTS / "scene" / "test_clearance.py").read_text())))
 
 
 def test_every_rule_has_exactly_one_bad_fixture():
-    fixtures = sorted([*BAD.FIXTURES, *PKG_CODES, *PLACE_CODES, *GZ_CODES])
+    fixtures = sorted([*BAD.FIXTURES, *PKG_CODES, *PLACE_CODES, *GZ_CODES, *WIRE_CODES])
     assert fixtures == sorted(RULES)
 
 
@@ -41,7 +45,7 @@ def test_rule_table_is_well_formed():
     for code, (severity, group, description) in RULES.items():
         assert severity in ("error", "warning", "info")
         assert code.startswith({"geometry": "GEOM", "hierarchy": "HIER", "placement": "PLACE",
-                                "package": "PKG", "gazebo": "GZ"}[group])
+                                "package": "PKG", "gazebo": "GZ", "conductor": "WIRE"}[group])
         assert description
     assert finding("GEOM003", "a/b/c", "x") == Finding("GEOM003", "warning", "a/b/c", "x")
 

@@ -487,13 +487,18 @@ def test_tiles_on_the_globe_land_at_the_site(mini, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def sample(sample_build, tmp_path_factory):
-    """The session's sample build with the oil-leak scenario run beside it: a folder
-    linking the build's outputs, its own runs/ (the shared build stays as built)."""
+    """The session's sample build with the oil-leak scenario run beside it: the build's
+    outputs hard-linked into a folder of its own (no copy of the bytes; `twin view`
+    serves regular files of the build and refuses a symlink out of it), with its own
+    runs/ (the shared build stays as built: writes replace files, never edit them)."""
     out = tmp_path_factory.mktemp("sample") / "build"
     out.mkdir()
     for sub in sample_build.iterdir():
         if sub.name != "runs":
-            (out / sub.name).symlink_to(sub)
+            if sub.is_dir():
+                shutil.copytree(sub, out / sub.name, copy_function=os.link, symlinks=True)
+            else:
+                os.link(sub, out / sub.name)
     proc = twin("run", SOURCES / "scenarios" / "oil_leak.toml", "--out", out)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return out
