@@ -18,15 +18,12 @@ applied, as the SDF applier lists shapes.
 from __future__ import annotations
 
 import asyncio
-import logging
 
 from .. import sun as sun_model
 from ..bridges.feeds import Feeds
 from ..bridges.inputs import read_inputs
 from ..datasets.plan import switch_angles
 from ..runtime.apply_sdf import sun_fragment
-
-log = logging.getLogger("twin.inputs")
 
 
 class SignalsIn:
