@@ -7,6 +7,7 @@ import json
 import shutil
 import struct
 import sys
+from pathlib import Path
 
 import pytest
 from lxml import etree
