@@ -1,7 +1,7 @@
 """The process that polls one IEC 61850 server (`python -m pipeline.bridges.mms_poller`).
 
 libiec61850's Python bindings hold the interpreter's lock for the whole of a blocking
-call (a connect to a server that accepts and never answers blocks 5 s), so an MMS client
+call (a connect to a server that accepts and never answers blocks until its timeout), so an MMS client
 in the twin's own process would stop its clock. It runs here instead, one process per
 server, and speaks JSON lines: its parent writes one line, the signals to poll
 ({"signals": [{"i", "ref", "q", "fc", "period_s"}], "timeout_ms"}), and reads events:
