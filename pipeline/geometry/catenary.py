@@ -199,18 +199,7 @@ def from_sag(p0, p1, target: float) -> Catenary:
         return _span_gap(a, _lowest(L, h, a), L, h) - target
 
     guess = math.log(L * chord / (8.0 * target))  # parabola: sag = L chord / 8a
-    lo, hi = guess - 0.5, guess + 0.5
-    for _ in range(200):
-        try:
-            if excess(lo) > 0:
-                break
-        except CatenaryError:
-            raise CatenaryError(f"sag {target:g} m is beyond any catenary of this span") from None
-        lo -= 1.0
-    for _ in range(200):
-        if excess(hi) < 0:
-            break
-        hi += 1.0
+    lo, hi = _bracket(excess, guess - 0.5, guess + 0.5, 1.0, f"sag {target:g} m is beyond any catenary of this span")
     log_a = brentq(excess, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200)
     a = math.exp(log_a)
     return Catenary(p0, p1, direction, L, h, a, _lowest(L, h, a))
@@ -337,18 +326,29 @@ def change_of_state(p0, p1, w: float, ea: float, alpha: float, h_ref: float, t_r
         length, integral = _length_and_integral(a, _lowest(L, h, a), L)
         return length - H * integral * elastic - target
 
-    lo, hi = math.log(h_ref) - 0.25, math.log(h_ref) + 0.25
+    lo, hi = _bracket(excess, math.log(h_ref) - 0.25, math.log(h_ref) + 0.25, 0.5,
+                      f"the span goes slack beyond representation at {t:g} deg C",
+                      ceiling=(math.log(h_ref) + 60,
+                               f"the conductor cannot shorten enough at {t:g} deg C (inextensible and taut)"))
+    return math.exp(brentq(excess, lo, hi, xtol=1e-14, rtol=4 * np.finfo(float).eps, maxiter=200))
+
+
+def _bracket(excess, lo: float, hi: float, step: float, too_low: str,
+             ceiling: tuple[float, str] | None = None) -> tuple[float, float]:
+    """Widen [lo, hi] by `step` until excess(lo) > 0 > excess(hi), for brentq. A
+    CatenaryError on the low side is re-raised as `too_low`; past `ceiling`'s bound the
+    high side raises its message."""
     for _ in range(200):
         try:
             if excess(lo) > 0:
                 break
         except CatenaryError:
-            raise CatenaryError(f"the span goes slack beyond representation at {t:g} deg C") from None
-        lo -= 0.5
+            raise CatenaryError(too_low) from None
+        lo -= step
     for _ in range(200):
         if excess(hi) < 0:
             break
-        if hi > math.log(h_ref) + 60:
-            raise CatenaryError(f"the conductor cannot shorten enough at {t:g} deg C (inextensible and taut)")
-        hi += 0.5
-    return math.exp(brentq(excess, lo, hi, xtol=1e-14, rtol=4 * np.finfo(float).eps, maxiter=200))
+        if ceiling is not None and hi > ceiling[0]:
+            raise CatenaryError(ceiling[1])
+        hi += step
+    return lo, hi
