@@ -290,3 +290,60 @@ def test_a_run_shows_a_bar_keeps_blenders_log_in_a_file_and_leaves_no_temp_files
     assert "frames" in proc.stderr and "1/1" in proc.stderr  # the bar, done
     assert str(log) in proc.stderr
     assert sorted(p.name for p in temp.rglob("*")) == []
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def dask_cli_cluster(tmp_path):
+    """A scheduler and a worker (under its nanny, two task threads) started with dask's
+    own CLI and no configuration of ours, as a user starts them."""
+    pytest.importorskip("distributed")
+    dask = Path(sys.executable).parent / "dask"
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    logs = [open(tmp_path / "scheduler.log", "w"), open(tmp_path / "worker.log", "w")]
+    procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                              cwd=tmp_path, env=env, stdout=logs[0], stderr=subprocess.STDOUT, start_new_session=True)]
+    procs.append(subprocess.Popen([str(dask), "worker", address, "--host", "127.0.0.1", "--nworkers", "1",
+                                   "--nthreads", "2", "--no-dashboard"],
+                                  cwd=tmp_path, env=env, stdout=logs[1], stderr=subprocess.STDOUT,
+                                  start_new_session=True))
+    try:
+        from distributed import Client
+
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(1, timeout=120)
+        yield address
+    finally:
+        for p in reversed(procs):
+            os.killpg(p.pid, signal.SIGTERM)
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+        for log in logs:
+            log.close()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_dataset_runs_on_a_cluster_started_with_dasks_cli(tiny_run, sample_build, tmp_path, dask_cli_cluster):
+    """`dask worker` runs its tasks in a daemonic process under its nanny, which may not
+    have multiprocessing children: each frame's Blender is a subprocess of its own."""
+    config, reference = tiny_run
+    out = _scene_copy(sample_build, tmp_path / "cli")
+    proc = _twin("dataset", config, "--out", out, "--executor", "dask", "--scheduler", dask_cli_cluster)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    expected, got = _files(reference), _files(out / "datasets" / "tiny")
+    assert got.keys() == expected.keys()
+    assert [k for k in expected if got[k] != expected[k]] == []

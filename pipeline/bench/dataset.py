@@ -42,8 +42,7 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 
 def dataset_section(ctx: Context) -> dict:
-    from ..engine.dask_executor import dask_executor
-    from ..datasets.run import dask_frames, run_dataset
+    from ..datasets.run import run_dataset
 
     built = ctx.built or ctx.out
     source = ctx.sources / CONFIG
@@ -59,8 +58,7 @@ def dataset_section(ctx: Context) -> dict:
         for sub in ("models", "scene"):
             (out / sub).symlink_to(built / sub)
         t0 = time.perf_counter()
-        pool = dask_frames(dask_executor) if executor == "dask" else None
-        folder = run_dataset(config, out, pool=pool, executor=executor, workers=workers, tasks_per_worker=tasks,
+        folder = run_dataset(config, out, executor=executor, workers=workers, tasks_per_worker=tasks,
                              sources=ctx.sources)
         wall = time.perf_counter() - t0
         timings = json.loads((folder / "timings.json").read_text())

@@ -1,0 +1,128 @@
+"""One frame of a dataset, rendered, labelled and written, inside a Blender process
+(blender_process.py): the scene a process keeps between the frames of one dataset
+(the union of the run's culled sets, every floodlight of the site), a frame's
+pictures and labels, and its record."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..files import atomic_path, atomic_write
+from ..geometry.pinhole import intrinsics
+from ..perception.gauge_reader import dial_of
+from ..render.sensor import PhoneCamera
+from ..runtime.site import load_site
+from . import config as dataset_config, labels
+from .plan import FramePlan, Planner, switch_angles
+
+_WORKER: dict = {}  # the scene a Blender process keeps between frames of one dataset
+
+
+def render(job: dict, index: int) -> None:
+    """Render, label and write frame `index` of the run `job` (run.py)."""
+    ctx = _context(job)
+    _frame(ctx, Path(job["folder"]), ctx["planner"].plan(index))
+
+
+def _context(job: dict) -> dict:
+    key = json.dumps(job, sort_keys=True)
+    if _WORKER.get("key") == key:
+        return _WORKER
+    from ..render.cycles import CyclesScene
+
+    if _WORKER.get("scene") is not None:
+        _WORKER["scene"].close()
+    cfg = dataset_config.load(job["config"])
+    site = load_site(Path(job["build"]), Path(job["sources"]))
+    cam = PhoneCamera(width=cfg.sensor.width, height=cfg.sensor.height, samples=cfg.sensor.samples,
+                      render_denoise=cfg.sensor.render_denoise)
+    scene = CyclesScene(site, cam, cfg.seed)
+    scene.load_many(job["union"])
+    scene.load_terrain()
+    # every floodlight of the site, whether or not a frame of this run sees its pole:
+    # a frame's light is then the same whichever frames share its worker
+    scene.add_lamps([p["tag"] for p in site.placements if p["asset"] == "lighting_pole"])
+    ids = labels.instance_ids(site.placements)
+    scene.set_instances(ids)
+    cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
+    category_of = {p["tag"]: cats.get(site.manifests.get(p["asset"], {}).get("category") or p["asset"], 0)
+                   for p in site.placements}
+    _WORKER.clear()
+    _WORKER.update(key=key, cfg=cfg, site=site, cam=cam, scene=scene, ids=ids,
+                   tag_of={v: k for k, v in ids.items()}, category_of=category_of,
+                   planner=Planner(cfg, site, Path(job["sources"])))
+    return _WORKER
+
+
+def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
+    from ..render.frames import develop_shot, pointer_binding
+
+    site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
+    scene.scene.cycles.seed = plan.seed
+    scene.show_only(plan.visible_tags)
+    for tag, position in plan.switches.items():
+        if tag in scene.objects:
+            m = site.manifests[site.placement(tag)["asset"]]
+            scene.set_joints(tag, m, switch_angles(m, position))
+    scene.set_shot(shot, pointer_binding(site, shot.target) if shot.target else None)
+    scene.set_sky(plan.aerosol)
+    linear = scene.render()
+    rgb, gain, wb, veil = develop_shot(scene, shot, linear, cam, None, plan.seed)
+    ids, depth = scene.render_labels()
+    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
+    record = _record(ctx, plan, k, ids, depth, gain, wb, veil)
+    fid = plan.frame_id
+    _write_png(folder / "images" / f"{fid}.png", rgb[..., ::-1])
+    _write_png(folder / "masks" / f"{fid}.png", ids)
+    with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, depth, allow_pickle=False)
+    atomic_write(folder / "records" / f"{fid}.json", json.dumps(record, sort_keys=True, indent=1) + "\n")
+
+
+def _write_png(path: Path, pixels: np.ndarray) -> None:
+    """PNG through OpenCV (no timestamps; 16-bit when the array is): BGR or one channel."""
+    import cv2
+
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(pixels))
+    if not ok:
+        raise RuntimeError(f"could not encode {path}")
+    atomic_write(path, buf.tobytes())
+
+
+def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, gain: float,
+            wb: np.ndarray, veil: float) -> dict:
+    site, shot, fid = ctx["site"], plan.shot, plan.frame_id
+    gauges = []
+    for p in site.placements:
+        dial = dial_of(site.pose(p), site.manifests.get(p["asset"], {}))
+        if dial is None or p["tag"] not in plan.oil_levels:
+            continue
+        seen = labels.gauge_visibility(dial, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
+        if seen["visible"]:  # the pointer's rows as posed in this frame: the study's H numerator, true
+            seen["pointer_rows_px"] = ctx["scene"].pointer_rows(p["tag"], shot.cam_pose, k)
+        gauges.append({"tag": p["tag"], "reading": plan.oil_levels[p["tag"]].get(dial.binding["variable"]),
+                       "unit": "%", **seen})
+    kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
+    return {
+        "frame_id": fid, "index": plan.index, "seed": plan.seed,
+        "image": f"images/{fid}.png", "mask": f"masks/{fid}.png", "depth": f"depth/{fid}.npy",
+        "camera": {"name": plan.camera, "K": kmat, "pose": shot.cam_pose.tolist(), "width": k["width"],
+                   "height": k["height"], "zoom": shot.lens.zoom, "hfov_deg": math.degrees(k["hfov"]),
+                   "near": shot.lens.near, "far": shot.lens.far, "target": shot.target,
+                   "convention": "pose: world-from-camera, ENU metres; the camera looks down its -Z, +Y up; "
+                                 "pixel (0, 0) is the top-left corner of the top-left pixel"},
+        "exposure": {"gain": gain, "white_balance": [float(v) for v in wb], "veil": veil},
+        "sun": {"azimuth_deg": math.degrees(shot.sun_azimuth), "elevation_deg": math.degrees(shot.sun_elevation),
+                "irradiance": shot.irradiance, "irradiance_unit": "W/m2, direct on a horizontal surface"},
+        "sky": {"tau_atm": plan.tau_atm, "aerosol_density": plan.aerosol},
+        "local_time": shot.when.isoformat(),
+        "states": {"oil_levels": plan.oil_levels, "switches": plan.switches},
+        "gauges": gauges,
+        "instances": int(len(np.unique(ids[ids > 0]))),
+        "annotations": labels.annotations(ids, ctx["tag_of"], ctx["category_of"]),
+    }
