@@ -347,3 +347,95 @@ def test_a_dataset_runs_on_a_cluster_started_with_dasks_cli(tiny_run, sample_bui
     expected, got = _files(reference), _files(out / "datasets" / "tiny")
     assert got.keys() == expected.keys()
     assert [k for k in expected if got[k] != expected[k]] == []
+
+
+# sha256 of the tiny config's labels as the separate label pass made them before issue 38
+# item 4 (main at 725b178, bpy 5.0.1): the pass now costs half as much, for the same bytes
+LABELS_BEFORE = {
+    "masks/000000.png": "4a1b57c488fe7edf7c200172d7ccfbd9de4fd378974d34aa88e96ac1084a4b69",
+    "masks/000001.png": "11d78e134de83122e08fac459ef12dd538e91c5a75d419d0f3a49035f9cad26c",
+    "masks/000002.png": "11d78e134de83122e08fac459ef12dd538e91c5a75d419d0f3a49035f9cad26c",
+    "masks/000003.png": "11d78e134de83122e08fac459ef12dd538e91c5a75d419d0f3a49035f9cad26c",
+    "depth/000000.npy": "fdd3ff1e5664d465bafa128d6772247fe29b43ba04ee3052dc26956c1e87eb54",
+    "depth/000001.npy": "56f63b2d8399aa3216b940c3d0c50bf712016c1f689a1530a1c9591462b2c6c3",
+    "depth/000002.npy": "56f63b2d8399aa3216b940c3d0c50bf712016c1f689a1530a1c9591462b2c6c3",
+    "depth/000003.npy": "56f63b2d8399aa3216b940c3d0c50bf712016c1f689a1530a1c9591462b2c6c3",
+    "coco.json": "34df99f44ff8890dcbd2feb4fac776a99292a084b93beb1d9a3dc8d1742ad7dd",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_the_labels_are_the_bytes_they_were_before_the_faster_label_pass(tiny_run):
+    import hashlib
+
+    _, folder = tiny_run
+    got = {rel: hashlib.sha256((folder / rel).read_bytes()).hexdigest() for rel in LABELS_BEFORE}
+    assert got == LABELS_BEFORE
+    timings = json.loads((folder / "timings.json").read_text())
+    assert len(timings["labels_s"]) == len(timings["render_s"]) == 4
+    assert all(0 < s for s in timings["labels_s"] + timings["render_s"])
+
+
+# --- glare labels (issue 38 item 2; no rendering) ------------------------------------------
+
+
+def test_the_clipped_mask_is_the_exposed_radiance_at_full_scale_before_noise():
+    from pipeline.render.sensor import PhoneCamera, clipped, develop
+
+    linear = np.full((4, 6, 3), 0.2)
+    linear[1, 2] = [0.2, 0.2, 1.5]  # one channel over full scale at gain 1
+    linear[3, 5] = 0.99
+    veil = np.zeros((4, 6))
+    veil[3, 5] = 0.02  # the lens's veil pushes this one over
+    mask = clipped(linear, 1.0, veil)
+    assert mask.dtype == bool and mask.shape == (4, 6)
+    assert sorted(zip(*np.nonzero(mask))) == [(1, 2), (3, 5)]
+    assert not clipped(linear, 0.5, veil).any()  # a shorter exposure clips nothing
+    assert clipped(linear, 1.0, veil, wb=np.array([1.0, 1.0, 0.5]))[1, 2] == False  # noqa: E712 - the blue gain
+    # the 8-bit picture of the same frame saturates there too (noise aside)
+    rgb = develop(linear, 1.0, veil, None, PhoneCamera(denoise=0))
+    assert (rgb[mask] == 255).any(axis=-1).all()
+
+
+def _dial_facing_the_camera():
+    from pipeline.geometry.pinhole import intrinsics
+    from pipeline.perception.gauge_reader import Dial
+
+    axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    dial = Dial(np.zeros(3), axis, up, np.cross(axis, up), {"variable": "level"})
+    pose = np.eye(4)
+    pose[2, 3] = 0.6  # 0.6 m in front of the dial, looking down -Z at it
+    return dial, pose, intrinsics(np.radians(40.0), 64, 48)
+
+
+def test_the_pointers_pixels_are_its_outline_projected_at_its_angle():
+    from pipeline.datasets import labels
+
+    dial, pose, k = _dial_facing_the_camera()
+    up = labels.pointer_pixels(dial, 0.0, pose, k)
+    rows, cols = np.nonzero(up)
+    assert up.shape == (48, 64) and len(rows) >= 5
+    # upright from its hub (3 cm below the pivot, the frame's centre) to its tip
+    assert rows.min() < 8 and 24 < rows.max() < 30 and rows.mean() < 20 and abs(cols.mean() - 31.5) < 1.0
+    left = labels.pointer_pixels(dial, np.pi / 2.0, pose, k)  # +90 deg: towards the dial's left (-x here)
+    rows, cols = np.nonzero(left)
+    assert cols.min() < 16 and 32 < cols.max() < 38 and cols.mean() < 28 and abs(rows.mean() - 23.5) < 1.0
+    behind = pose.copy()
+    behind[2, 3] = -0.6  # the camera behind the dial, looking away from it
+    assert not labels.pointer_pixels(dial, 0.0, behind, k).any()
+
+
+def test_glare_hides_a_pointer_when_the_sensor_clipped_most_of_its_pixels():
+    from pipeline.datasets import labels
+
+    dial, pose, k = _dial_facing_the_camera()
+    pointer = labels.pointer_pixels(dial, 0.0, pose, k)
+    top = np.zeros((48, 64), bool)
+    top[:24] = True  # a clipped patch over the upper half: the pointer at 0 deg lies in it
+    hidden = labels.pointer_glare(pointer, top)  # all but its hub's tail
+    assert hidden["glare_hides_pointer"] and 0.6 < hidden["pointer_clipped_share"] < 0.9
+    assert hidden["pointer_px"] == int(pointer.sum())
+    seen = labels.pointer_glare(pointer, ~top)
+    assert not seen["glare_hides_pointer"] and seen["pointer_clipped_share"] < 0.4
+    assert not labels.pointer_glare(np.zeros_like(top), top)["glare_hides_pointer"]  # no pointer, nothing hidden

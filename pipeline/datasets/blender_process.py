@@ -8,7 +8,8 @@ Blender renders on the main thread of its process, which a dask worker's task
 threads are not.
 
 The two speak JSON lines: a request {"job", "index"} on the process's stdin, one
-reply line on the stdout it had when it started: {"ok": true} or the frame's failure
+reply line on the stdout it had when it started: {"ok": true, seconds of its parts} or
+the frame's failure
 as data (a user error with its file and object, or a bug with its trace). Blender's
 own log (its file descriptors 1 and 2) goes to LOG. The process keeps its scene
 between frames of one job (frame.py), is replaced after `tasks_per_worker` frames
@@ -114,7 +115,7 @@ def render_frame(job: dict, index: int, tasks_per_worker: int) -> dict:
         raise UserError(reply["file"], reply["object"], reply["message"])
     if not reply["ok"]:
         raise FrameFailed(f"{reply['error']}\n{reply.get('trace', '')}")
-    return {"seconds": time.perf_counter() - t0}
+    return {**{k: v for k, v in reply.items() if k != "ok"}, "seconds": time.perf_counter() - t0}
 
 
 def _retire(blender: BlenderProcess) -> None:
@@ -175,8 +176,7 @@ def main(log: str) -> int:
 
 def _serve(render, job: dict, index: int) -> dict:
     try:
-        render(job, index)
-        return {"ok": True}
+        return {"ok": True, **(render(job, index) or {})}
     except UserError as e:
         return {"ok": False, "user_error": str(e), "file": e.file, "object": e.obj, "message": e.message}
     except Exception as e:  # noqa: BLE001 - the worker reports it with the frame it stopped at

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,8 @@ import numpy as np
 from ..files import atomic_path, atomic_write
 from ..geometry.pinhole import intrinsics
 from ..perception.gauge_reader import dial_of
-from ..render.sensor import PhoneCamera
+from ..perception.gauge import pointer_angle
+from ..render.sensor import PhoneCamera, clipped, develop
 from ..runtime.site import load_site
 from . import config as dataset_config, labels
 from .plan import FramePlan, Planner, switch_angles
@@ -22,10 +24,11 @@ from .plan import FramePlan, Planner, switch_angles
 _WORKER: dict = {}  # the scene a Blender process keeps between frames of one dataset
 
 
-def render(job: dict, index: int) -> None:
-    """Render, label and write frame `index` of the run `job` (run.py)."""
+def render(job: dict, index: int) -> dict:
+    """Render, label and write frame `index` of the run `job` (run.py); returns the
+    seconds of its picture (render_s) and of its label pass (labels_s)."""
     ctx = _context(job)
-    _frame(ctx, Path(job["folder"]), ctx["planner"].plan(index))
+    return _frame(ctx, Path(job["folder"]), ctx["planner"].plan(index), job.get("labels_as_lights", False))
 
 
 def _context(job: dict) -> dict:
@@ -58,8 +61,8 @@ def _context(job: dict) -> dict:
     return _WORKER
 
 
-def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
-    from ..render.frames import develop_shot, pointer_binding
+def _frame(ctx: dict, folder: Path, plan: FramePlan, labels_as_lights: bool = False) -> dict:
+    from ..render.frames import pointer_binding, shot_exposure
 
     site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
     scene.scene.cycles.seed = plan.seed
@@ -70,18 +73,26 @@ def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
             scene.set_joints(tag, m, switch_angles(m, position))
     scene.set_shot(shot, pointer_binding(site, shot.target) if shot.target else None)
     scene.set_sky(plan.aerosol)
+    t0 = time.perf_counter()
     linear = scene.render()
-    rgb, gain, wb, veil = develop_shot(scene, shot, linear, cam, None, plan.seed)
-    ids, depth = scene.render_labels()
+    t1 = time.perf_counter()
+    gain, wb, veil = shot_exposure(scene, shot, linear, cam, None)
+    rgb = develop(linear, gain, veil, wb, cam, seed=plan.seed)
+    clip = clipped(linear, gain, veil, wb)
+    t2 = time.perf_counter()
+    ids, depth = scene.render_labels(as_lights=labels_as_lights)
+    t3 = time.perf_counter()
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
-    record = _record(ctx, plan, k, ids, depth, gain, wb, veil)
+    record = _record(ctx, plan, k, ids, depth, gain, wb, float(veil.mean()), clip)
     fid = plan.frame_id
     _write_png(folder / "images" / f"{fid}.png", rgb[..., ::-1])
     _write_png(folder / "masks" / f"{fid}.png", ids)
+    _write_png(folder / "glare" / f"{fid}.png", clip.astype(np.uint8))
     with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
         with open(tmp, "wb") as fh:
             np.save(fh, depth, allow_pickle=False)
     atomic_write(folder / "records" / f"{fid}.json", json.dumps(record, sort_keys=True, indent=1) + "\n")
+    return {"render_s": t1 - t0, "labels_s": t3 - t2}
 
 
 def _write_png(path: Path, pixels: np.ndarray) -> None:
@@ -95,7 +106,7 @@ def _write_png(path: Path, pixels: np.ndarray) -> None:
 
 
 def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, gain: float,
-            wb: np.ndarray, veil: float) -> dict:
+            wb: np.ndarray, veil: float, clip: np.ndarray) -> dict:
     site, shot, fid = ctx["site"], plan.shot, plan.frame_id
     gauges = []
     for p in site.placements:
@@ -103,10 +114,13 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         if dial is None or p["tag"] not in plan.oil_levels:
             continue
         seen = labels.gauge_visibility(dial, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
-        if seen["visible"]:  # the pointer's rows as posed in this frame: the study's H numerator, true
+        reading = plan.oil_levels[p["tag"]].get(dial.binding["variable"])
+        angle = None if reading is None else pointer_angle(reading, dial.binding)
+        if seen["visible"] and angle is not None:  # the pointer's rows as posed in this frame: the study's H numerator, true
             seen["pointer_rows_px"] = ctx["scene"].pointer_rows(p["tag"], shot.cam_pose, k)
-        gauges.append({"tag": p["tag"], "reading": plan.oil_levels[p["tag"]].get(dial.binding["variable"]),
-                       "unit": "%", **seen})
+            seen.update(labels.pointer_glare(labels.pointer_pixels(dial, angle, shot.cam_pose, k), clip))
+        gauges.append({"tag": p["tag"], "reading": reading, "unit": "%", "pointer_angle_deg": None if angle is None else math.degrees(angle),
+                       **seen})
     kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
     return {
         "frame_id": fid, "index": plan.index, "seed": plan.seed,
@@ -124,5 +138,8 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         "states": {"oil_levels": plan.oil_levels, "switches": plan.switches},
         "gauges": gauges,
         "instances": int(len(np.unique(ids[ids > 0]))),
+        "glare": {"mask": f"glare/{fid}.png", "clipped_px": int(clip.sum()),
+                  "definition": "1 where the sensor clips: the exposed radiance (render + lens veil) "
+                                "reaches full scale in a channel, before noise"},
         "annotations": labels.annotations(ids, ctx["tag_of"], ctx["category_of"]),
     }

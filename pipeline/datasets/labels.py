@@ -1,18 +1,23 @@
 """Per-frame ground truth from the renderer's own passes: COCO instance annotations
-(RLE masks, tight boxes, pixel areas) from the instance-id image, and gauge visibility
-from the ids and the depth at the dial's centre. Pure numpy and pycocotools: no bpy."""
+(RLE masks, tight boxes, pixel areas) from the instance-id image, gauge visibility
+from the ids and the depth at the dial's centre, and whether the sensor's clipped
+pixels cover a gauge's pointer. Pure numpy, OpenCV and pycocotools: no bpy."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..perception.gauge_reader import Dial
+from ..perception.gauge_reader import POINTER_OUTLINE, Dial
 from ..geometry.pinhole import project
 
 # a dial is visible when the surface at its centre's pixel is its own placement's and
 # lies within this distance of the dial's centre along the view (the gauge glass, the
 # bezel's depth)
 DIAL_DEPTH_TOLERANCE_M = 0.25
+
+# glare hides a pointer when the sensor clipped at least this share of its pixels: a
+# reader sees a white blot there, not a dark line
+GLARE_HIDES_SHARE = 0.5
 
 
 def instance_ids(placements: list[dict]) -> dict[str, int]:
@@ -67,3 +72,32 @@ def gauge_visibility(dial: Dial, cam_pose: np.ndarray, k: dict, ids: np.ndarray,
     record["visible"] = bool(facing and ids[row, col] == instance
                              and abs(float(depth[row, col]) - expected) <= DIAL_DEPTH_TOLERANCE_M)
     return record
+
+
+def pointer_pixels(dial: Dial, angle: float, cam_pose: np.ndarray, k: dict) -> np.ndarray:
+    """(h, w) bool: the pixels the pointer's outline (gauge_reader.POINTER_OUTLINE) at
+    `angle` covers, projected; at least the pixel of its middle when it projects
+    smaller than a pixel. Empty when the pointer is behind the camera or off the frame."""
+    import cv2
+
+    along, across = dial.direction(angle), dial.direction(angle - np.pi / 2.0)
+    outline = dial.centre + POINTER_OUTLINE[:, :1] * across + POINTER_OUTLINE[:, 1:] * along
+    uv = project(outline, cam_pose, k)
+    mask = np.zeros((k["height"], k["width"]), np.uint8)
+    if np.isnan(uv).any():
+        return mask.astype(bool)
+    # OpenCV's integer coordinates are pixel centres; ours put (0, 0) at a corner
+    corners = np.round((uv - 0.5) * 16.0).astype(np.int32)
+    cv2.fillPoly(mask, [corners], 1, lineType=cv2.LINE_8, shift=4)
+    if not mask.any():
+        u, v = uv.mean(axis=0)
+        if 0 <= u < k["width"] and 0 <= v < k["height"]:
+            mask[int(v), int(u)] = 1
+    return mask.astype(bool)
+
+
+def pointer_glare(pointer: np.ndarray, clipped: np.ndarray) -> dict:
+    """The share of the pointer's pixels the sensor clipped, and whether that hides it."""
+    n = int(pointer.sum())
+    share = float(clipped[pointer].mean()) if n else 0.0
+    return {"pointer_px": n, "pointer_clipped_share": share, "glare_hides_pointer": bool(n and share >= GLARE_HIDES_SHARE)}

@@ -3,6 +3,7 @@
     OUT/datasets/<name>/
         images/<frame_id>.png    the phone's picture (8-bit sRGB)
         masks/<frame_id>.png     16-bit instance ids, 0 = background
+        glare/<frame_id>.png     8-bit, 1 where the sensor clipped (sensor.clipped), else 0
         depth/<frame_id>.npy     float32 planar depth (m) along the optical axis, inf = sky
         records/<frame_id>.json  one frame's labels and annotations (what a resumed run keeps)
         frames.jsonl, coco.json  the first N frames' records, assembled at the end
@@ -43,7 +44,7 @@ from .plan import Planner, frame_id
 from ..runtime.site import Site, load_site
 
 RENDERER = "blender-cycles-cpu"
-FOLDERS = ("images", "masks", "depth", "records")
+FOLDERS = ("images", "masks", "glare", "depth", "records")
 THREADS = 2  # a frame's (CyclesScene.THREADS): the native thread pools of its worker get as many
 
 
@@ -52,13 +53,14 @@ THREADS = 2  # a frame's (CyclesScene.THREADS): the native thread pools of its w
 
 def run_dataset(config_path, out, *, frames: int | None = None, executor: str = "local",
                 scheduler: str | None = None, workers: int = 1, tasks_per_worker: int | None = None,
-                sources: Path, progress=None) -> Path:
+                sources: Path, progress=None, labels_as_lights: bool = False) -> Path:
     """Render the config's first `frames` frames (all by default) that are not on disk
     yet, then write frames.jsonl and coco.json. Returns the dataset's folder.
     Frames run on the engine's executors (`executor`: "local", "dask" on a
     LocalCluster or on the cluster at `scheduler`, "in-process"), `workers` at once,
     each in a Blender subprocess of its worker (blender_process.py); `tasks_per_worker`:
-    frames a Blender process renders before it is replaced (default: the config's)."""
+    frames a Blender process renders before it is replaced (default: the config's);
+    `labels_as_lights`: the label pass as it was before (the bench's "before")."""
     cfg = dataset_config.load(config_path)
     n = cfg.count if frames is None else frames
     if not 1 <= n <= cfg.count:
@@ -80,19 +82,22 @@ def run_dataset(config_path, out, *, frames: int | None = None, executor: str = 
     # absolute: a worker of a cluster started elsewhere has a working folder of its own
     job = {"build": os.path.abspath(out), "sources": os.path.abspath(sources),
            "config": str(Path(config_path).resolve()), "folder": os.path.abspath(folder), "union": union,
-           "log": os.path.abspath(log)}
+           "log": os.path.abspath(log), **({"labels_as_lights": True} if labels_as_lights else {})}
     if progress:
         progress(0, len(todo))
     t0 = time.perf_counter()
-    seconds = []
+    seconds, parts = [], []
     if todo:
         per_process = tasks_per_worker or cfg.sensor.tasks_per_worker
-        seconds = _render(cfg, job, todo, per_process, executor, scheduler, workers, log, progress)
+        parts = _render(cfg, job, todo, per_process, executor, scheduler, workers, log, progress)
+        seconds = [p["seconds"] for p in parts]
     wall = time.perf_counter() - t0
     _assemble(folder, cfg, site, n)
     atomic_write(folder / "timings.json", json.dumps(
         {"frames": n, "rendered": len(todo), "executor": executor, "workers": workers, "plan_s": plan_s,
-         "wall_s": wall, "frame_s": seconds, "scene_placements": len(union)}, indent=1, sort_keys=True) + "\n")
+         "wall_s": wall, "frame_s": seconds, "scene_placements": len(union),
+         "render_s": [p.get("render_s") for p in parts], "labels_s": [p.get("labels_s") for p in parts]},
+        indent=1, sort_keys=True) + "\n")
     return folder
 
 
@@ -123,7 +128,7 @@ def _claim(folder: Path, cfg) -> None:
 def _done(folder: Path, index: int) -> bool:
     fid = frame_id(index)
     return all((folder / p).is_file() for p in (f"records/{fid}.json", f"images/{fid}.png", f"masks/{fid}.png",
-                                                f"depth/{fid}.npy"))
+                                                f"glare/{fid}.png", f"depth/{fid}.npy"))
 
 
 def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
@@ -145,7 +150,7 @@ def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
 
 
 def _render(cfg, job: dict, todo: list[int], per_process: int, executor: str, scheduler: str | None,
-            workers: int, log: Path, progress) -> list[float]:
+            workers: int, log: Path, progress) -> list[dict]:
     """Frames `todo` on the engine's executor, each a run_task call; the first failure
     (a frame's own, or a dead worker) stops the run with the frame it names."""
     factory = EXECUTORS[executor]
@@ -161,7 +166,7 @@ def _render(cfg, job: dict, todo: list[int], per_process: int, executor: str, sc
             if not result["ok"]:
                 why = result.get("user_error") or result["error"]
                 raise UserError(cfg.path, f"frame {frame_id(futures[f])}", f"{why} (Blender's log: {log})")
-            seconds.append(result["seconds"])
+            seconds.append({**result["result"], "seconds": result["seconds"]})
             if progress:
                 progress(len(seconds), len(todo))
     finally:
