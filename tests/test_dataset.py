@@ -191,6 +191,15 @@ def test_labels_are_exact_and_coco_loads(tiny_run):
         assert k[0, 2] == 48.0 and k[1, 2] == 36.0 and len(frame["camera"]["pose"]) == 4
         assert {g["tag"] for g in frame["gauges"]} >= {"RE-A1", "RE-A2"}
         assert all(0.0 <= g["reading"] <= 100.0 for g in frame["gauges"])
+        # the glare mask beside the instance mask: 0/1, as many ones as the record says
+        glare = cv2.imread(str(folder / frame["glare"]["mask"]), cv2.IMREAD_UNCHANGED)
+        assert glare.dtype == np.uint8 and glare.shape == masks.shape and set(np.unique(glare)) <= {0, 1}
+        assert int(glare.sum()) == frame["glare"]["clipped_px"]
+        for g in frame["gauges"]:
+            assert -360.0 <= g["pointer_angle_deg"] <= 360.0
+            if g["visible"]:
+                assert g["pointer_px"] >= 1 and isinstance(g["glare_hides_pointer"], bool)
+                assert 0.0 <= g["pointer_clipped_share"] <= 1.0
         # the camera aims at its target's dial: the target is in the frame, and its
         # gauge is visible whenever the dial's centre pixel is the dial at its depth
         target = frame["camera"]["target"]
@@ -439,3 +448,101 @@ def test_glare_hides_a_pointer_when_the_sensor_clipped_most_of_its_pixels():
     seen = labels.pointer_glare(pointer, ~top)
     assert not seen["glare_hides_pointer"] and seen["pointer_clipped_share"] < 0.4
     assert not labels.pointer_glare(np.zeros_like(top), top)["glare_hides_pointer"]  # no pointer, nothing hidden
+
+
+# --- appearance variation (issue 38 item 5; no rendering) ------------------------------------
+
+LOOK = """
+[appearance]
+colour_jitter = [0.1, 0.2]
+roughness_jitter = 0.1
+dirt = [0.0, 0.8]
+rust = [0.0, 0.5]
+oil_stains = [0.0, 0.3]
+weathering = [0.2, 0.6]
+sky = { clear = 2, overcast = 1, hazy = 1 }
+exposure_ev = [-1.0, 1.0]
+vignetting = [0.0, 0.3]
+"""
+
+
+def test_the_appearance_table_loads_and_is_optional(tmp_path):
+    plain = dataset_config.load(_config(tmp_path))
+    assert plain.appearance is None
+    cfg = dataset_config.load(_config(tmp_path, TINY + LOOK))
+    look = cfg.appearance
+    assert look.dirt == (0.0, 0.8) and look.roughness_jitter == (0.1, 0.1) and look.exposure_ev == (-1.0, 1.0)
+    assert dict(look.sky) == {"clear": 2.0, "overcast": 1.0, "hazy": 1.0}
+
+
+@pytest.mark.parametrize("edit, key", [
+    (lambda t: t.replace("dirt = [0.0, 0.8]", "dirt = [0.0, 1.8]"), "appearance.dirt"),
+    (lambda t: t.replace("hazy = 1 }", "foggy = 1 }"), "appearance.sky.foggy"),
+    (lambda t: t.replace("clear = 2, overcast = 1, hazy = 1", "clear = 0"), "appearance.sky"),
+    (lambda t: t.replace("vignetting = [0.0, 0.3]", "vignette = 0.3"), "appearance.vignette"),
+    (lambda t: t.replace("exposure_ev = [-1.0, 1.0]", "exposure_ev = [1.0, -1.0]"), "appearance.exposure_ev"),
+])
+def test_a_bad_appearance_is_one_error_naming_the_key(tmp_path, edit, key):
+    path = _config(tmp_path, edit(TINY + LOOK))
+    with pytest.raises(UserError) as e:
+        dataset_config.load(path)
+    assert e.value.obj == key
+
+
+def test_a_frames_look_is_its_own_draw_and_leaves_the_rest_of_the_plan_alone(tmp_path):
+    from pipeline.datasets.plan import appearance
+
+    cfg = dataset_config.load(_config(tmp_path, TINY + LOOK))
+    tags = ["RE-A2", "RE-A1", "T1"]
+    a = appearance(cfg.appearance, cfg.seed, 3, tags)
+    assert a == appearance(cfg.appearance, cfg.seed, 3, list(reversed(tags)))  # drawn in tag order
+    assert a != appearance(cfg.appearance, cfg.seed, 4, tags)
+    assert a["sky"] in ("clear", "overcast", "hazy") and -1.0 <= a["exposure_ev"] <= 1.0
+    assert 0.0 <= a["vignetting"] <= 0.3 and sorted(a["instances"]) == sorted(tags)
+    for v in a["instances"].values():
+        assert all(0.8 <= c <= 1.2 for c in v["tint"]) and -0.1 <= v["roughness"] <= 0.1
+        assert 0.0 <= v["dirt"] <= 0.8 and 0.2 <= v["weathering"] <= 0.6
+    skies = {appearance(cfg.appearance, cfg.seed, i, tags)["sky"] for i in range(40)}
+    assert skies == {"clear", "overcast", "hazy"}
+
+
+@pytest.mark.slow
+def test_an_appearance_table_changes_no_other_draw_of_a_frame(sample_build, tmp_path):
+    from pipeline.datasets.plan import Planner
+    from pipeline.runtime.site import load_site
+
+    site = load_site(sample_build, ROOT / "sources")
+    plain = Planner(dataset_config.load(_config(tmp_path)), site, ROOT / "sources")
+    (tmp_path / "look").mkdir()
+    looks = Planner(dataset_config.load(_config(tmp_path / "look", TINY + LOOK)), site, ROOT / "sources")
+    for i in range(4):
+        p, q = plain.plan(i), looks.plan(i)
+        assert p.look is None and q.look is not None and sorted(q.look["instances"]) == sorted(q.visible_tags)
+        assert p.seed == q.seed and np.array_equal(p.shot.cam_pose, q.shot.cam_pose)
+        assert p.oil_levels == q.oil_levels and p.visible_tags == q.visible_tags
+
+
+def test_vignetting_darkens_the_corners_and_leaves_the_centre():
+    from pipeline.render.appearance import vignette
+
+    flat = np.ones((48, 64, 3), np.float32)
+    out = vignette(flat, 0.3)
+    assert out.dtype == np.float32 and out[24, 32, 0] > 0.999 and abs(out[0, 0, 0] - 0.7) < 0.02
+    assert vignette(flat, 0.0) is flat
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_an_appearance_changes_the_picture_and_not_the_labels(tiny_run, sample_build, tmp_path):
+    """Dirt, rust, tints, another sky and exposure on frame 0: the same masks and depth
+    (nothing moved), another picture, and the draw in its record."""
+    _, reference = tiny_run
+    out = _scene_copy(sample_build, tmp_path / "look")
+    proc = _twin("dataset", _config(tmp_path, TINY + LOOK), "--out", out, "--frames", "1")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    folder = out / "datasets" / "tiny"
+    for rel in ("masks/000000.png", "depth/000000.npy"):
+        assert (folder / rel).read_bytes() == (reference / rel).read_bytes(), rel
+    assert (folder / "images/000000.png").read_bytes() != (reference / "images/000000.png").read_bytes()
+    record = json.loads((folder / "records/000000.json").read_text())
+    assert sorted(record["appearance"]["instances"]) and record["appearance"]["sky"] in ("clear", "overcast", "hazy")

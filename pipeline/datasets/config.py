@@ -5,6 +5,10 @@ what conditions and equipment states to sample, how many frames, and the seed.
     [sensor]     width, height, samples, render_denoise, tasks_per_worker
     [conditions] dates, local_time = [from, to], tau_atm = [lo, hi], aerosol = [lo, hi]
     [states]     oil_level = [lo, hi] (%), switch_open = probability
+    [appearance] per instance: colour_jitter, roughness_jitter, dirt, rust, oil_stains,
+                 weathering = [lo, hi]; per frame: sky = {clear, overcast, hazy} weights,
+                 exposure_ev = [lo, hi], vignetting = [lo, hi] (optional: without it
+                 every piece of equipment looks as its package made it)
     [[cameras]]  kind = "inspection_point" | "route" | "ptz", weight, zoom = [lo, hi], ...
 
 Every error names the file and the key: a config is user input.
@@ -55,6 +59,31 @@ class States:
 
 
 @dataclass(frozen=True)
+class Appearance:
+    """How equipment and skies vary, drawn per frame (plan.py). Per instance:
+    colour_jitter scales each base colour channel by 1 + U(-j, j); roughness_jitter adds
+    U(-j, j) to roughness; dirt, rust, oil_stains, weathering: each an amount in 0..1
+    drawn from its range (procedural masks in the materials, render/appearance.py).
+    Per frame: a sky kind from the weights (overcast dims the sun behind cloud and
+    greys the sky, hazy thickens the aerosol), an exposure compensation in EV on the
+    metered gain, and the lens's vignetting (the corners' light lost, 0..0.6)."""
+
+    colour_jitter: tuple[float, float] = (0.0, 0.0)
+    roughness_jitter: tuple[float, float] = (0.0, 0.0)
+    dirt: tuple[float, float] = (0.0, 0.0)
+    rust: tuple[float, float] = (0.0, 0.0)
+    oil_stains: tuple[float, float] = (0.0, 0.0)
+    weathering: tuple[float, float] = (0.0, 0.0)
+    sky: tuple[tuple[str, float], ...] = (("clear", 1.0),)
+    exposure_ev: tuple[float, float] = (0.0, 0.0)
+    vignetting: tuple[float, float] = (0.0, 0.0)
+
+
+SKIES = ("clear", "overcast", "hazy")
+INSTANCE_KEYS = ("colour_jitter", "roughness_jitter", "dirt", "rust", "oil_stains", "weathering")
+
+
+@dataclass(frozen=True)
 class Camera:
     """One camera family. inspection_point: `points` (site.toml names; all when empty)
     looking at their targets. route: a polyline `path` of plan (x, y) on `level`,
@@ -85,6 +114,7 @@ class DatasetConfig:
     conditions: Conditions
     states: States
     cameras: tuple[Camera, ...]
+    appearance: Appearance | None = None  # None: no [appearance] table, materials as imported
     digest: str = field(default="")  # sha256 of the file: what a resumed run must match
 
 
@@ -111,6 +141,7 @@ def load(path: str | Path) -> DatasetConfig:
         sensor=_sensor(r, data.get("sensor", {})), conditions=_conditions(r, r.table(data, "conditions")),
         states=_states(r, data.get("states", {})),
         cameras=tuple(_camera(r, c, f"cameras[{i}]") for i, c in enumerate(cams)),
+        appearance=_appearance(r, data["appearance"]) if "appearance" in data else None,
         digest=hashlib.sha256(raw).hexdigest())
 
 
@@ -158,6 +189,29 @@ def _conditions(r: "_Reader", t: dict) -> Conditions:
 def _states(r: "_Reader", t: dict) -> States:
     return States(r.pair(t, "states.oil_level", (100.0, 100.0), lo=0.0, hi=100.0),
                   r.number(t, "states.switch_open", 0.0, lo=0.0, hi=1.0))
+
+
+def _appearance(r: "_Reader", t) -> Appearance:
+    if not isinstance(t, dict):
+        raise UserError(r.path, "appearance", "a [appearance] table")
+    known = set(INSTANCE_KEYS) | {"sky", "exposure_ev", "vignetting"}
+    for k in t:
+        if k not in known:
+            raise UserError(r.path, f"appearance.{k}", f"unknown key: one of {', '.join(sorted(known))}")
+    ranges = {k: r.pair(t, f"appearance.{k}", (0.0, 0.0), lo=0.0, hi=1.0) for k in INSTANCE_KEYS}
+    sky = t.get("sky", {"clear": 1.0})
+    if not isinstance(sky, dict) or not sky:
+        raise UserError(r.path, "appearance.sky", "a table of weights, e.g. {clear = 2, overcast = 1, hazy = 1}")
+    weights = []
+    for kind in sorted(sky):
+        if kind not in SKIES:
+            raise UserError(r.path, f"appearance.sky.{kind}", f"one of {', '.join(SKIES)}")
+        weights.append((kind, r.number(sky, f"appearance.sky.{kind}", lo=0.0)))
+    if sum(w for _, w in weights) <= 0:
+        raise UserError(r.path, "appearance.sky", "the weights sum to 0")
+    return Appearance(**ranges, sky=tuple(weights),
+                      exposure_ev=r.pair(t, "appearance.exposure_ev", (0.0, 0.0), lo=-4.0, hi=4.0),
+                      vignetting=r.pair(t, "appearance.vignetting", (0.0, 0.0), lo=0.0, hi=0.6))
 
 
 def _camera(r: "_Reader", t: dict, key: str) -> Camera:

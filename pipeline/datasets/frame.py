@@ -16,7 +16,8 @@ from ..files import atomic_path, atomic_write
 from ..geometry.pinhole import intrinsics
 from ..perception.gauge_reader import dial_of
 from ..perception.gauge import pointer_angle
-from ..render.sensor import PhoneCamera, clipped, develop
+from ..render import appearance
+from ..render.sensor import PhoneCamera, clipped, develop, metered_gain, metered_white_balance
 from ..runtime.site import load_site
 from . import config as dataset_config, labels
 from .plan import FramePlan, Planner, switch_angles
@@ -51,6 +52,8 @@ def _context(job: dict) -> dict:
     scene.add_lamps([p["tag"] for p in site.placements if p["asset"] == "lighting_pole"])
     ids = labels.instance_ids(site.placements)
     scene.set_instances(ids)
+    if cfg.appearance is not None:
+        appearance.prepare(scene)
     cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
     category_of = {p["tag"]: cats.get(site.manifests.get(p["asset"], {}).get("category") or p["asset"], 0)
                    for p in site.placements}
@@ -73,10 +76,17 @@ def _frame(ctx: dict, folder: Path, plan: FramePlan, labels_as_lights: bool = Fa
             scene.set_joints(tag, m, switch_angles(m, position))
     scene.set_shot(shot, pointer_binding(site, shot.target) if shot.target else None)
     scene.set_sky(plan.aerosol)
+    look = plan.look
+    if ctx["cfg"].appearance is not None:
+        appearance.apply(scene, look, plan.aerosol)
     t0 = time.perf_counter()
     linear = scene.render()
     t1 = time.perf_counter()
-    gain, wb, veil = shot_exposure(scene, shot, linear, cam, None)
+    lock = None
+    if look is not None:  # the lens's vignetting, and the exposure compensated from the metered one
+        linear = appearance.vignette(linear, look["vignetting"])
+        lock = (metered_gain(linear, cam) * 2.0 ** look["exposure_ev"], metered_white_balance(linear, cam))
+    gain, wb, veil = shot_exposure(scene, shot, linear, cam, lock)
     rgb = develop(linear, gain, veil, wb, cam, seed=plan.seed)
     clip = clipped(linear, gain, veil, wb)
     t2 = time.perf_counter()
@@ -138,6 +148,7 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         "states": {"oil_levels": plan.oil_levels, "switches": plan.switches},
         "gauges": gauges,
         "instances": int(len(np.unique(ids[ids > 0]))),
+        **({"appearance": plan.look} if plan.look is not None else {}),
         "glare": {"mask": f"glare/{fid}.png", "clipped_px": int(clip.sum()),
                   "definition": "1 where the sensor clips: the exposed radiance (render + lens veil) "
                                 "reaches full scale in a channel, before noise"},
