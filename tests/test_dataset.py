@@ -197,7 +197,9 @@ def test_labels_are_exact_and_coco_loads(tiny_run):
         assert int(glare.sum()) == frame["glare"]["clipped_px"]
         for g in frame["gauges"]:
             assert -360.0 <= g["pointer_angle_deg"] <= 360.0
+            assert len(g["keypoints"]) == 3 * len(frame["gauge_keypoints"])
             if g["visible"]:
+                assert g["keypoints"][2] == 2  # the dial's centre is seen where the gauge is
                 assert g["pointer_px"] >= 1 and isinstance(g["glare_hides_pointer"], bool)
                 assert 0.0 <= g["pointer_clipped_share"] <= 1.0
         # the camera aims at its target's dial: the target is in the frame, and its
@@ -412,7 +414,7 @@ def _dial_facing_the_camera():
     from pipeline.perception.gauge_reader import Dial
 
     axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
-    dial = Dial(np.zeros(3), axis, up, np.cross(axis, up), {"variable": "level"})
+    dial = Dial(np.zeros(3), axis, up, np.cross(axis, up), {"variable": "level", "range": [-2.0, 2.0]})
     pose = np.eye(4)
     pose[2, 3] = 0.6  # 0.6 m in front of the dial, looking down -Z at it
     return dial, pose, intrinsics(np.radians(40.0), 64, 48)
@@ -546,3 +548,24 @@ def test_an_appearance_changes_the_picture_and_not_the_labels(tiny_run, sample_b
     assert (folder / "images/000000.png").read_bytes() != (reference / "images/000000.png").read_bytes()
     record = json.loads((folder / "records/000000.json").read_text())
     assert sorted(record["appearance"]["instances"]) and record["appearance"]["sky"] in ("clear", "overcast", "hazy")
+
+
+def test_gauge_keypoints_are_projected_with_their_visibility():
+    from pipeline.datasets import labels
+
+    dial, pose, k = _dial_facing_the_camera()
+    ids = np.full((48, 64), 5, np.uint16)
+    depth = np.full((48, 64), 0.6, np.float32)
+    kp = np.array(labels.gauge_keypoints(dial, 0.0, pose, k, ids, depth, 5)).reshape(-1, 3)
+    assert kp.shape == (len(labels.KEYPOINTS), 3) and (kp[:, 2] == 2).all()
+    assert np.allclose(kp[0, :2], [32.0, 24.0])  # the pivot at the frame's centre
+    assert kp[1, 1] < 24.0 and abs(kp[1, 0] - 32.0) < 1e-6  # the tip straight up at angle 0
+    # the scale's ends at -2 and +2 rad: mirror images about the vertical through the pivot
+    assert abs((kp[2, 0] - 32.0) + (kp[3, 0] - 32.0)) < 1e-6 and abs(kp[2, 1] - kp[3, 1]) < 1e-6
+    tip = kp[1, :2].astype(int)
+    ids[tip[1], tip[0]] = 9  # something else in front of the tip
+    hidden = np.array(labels.gauge_keypoints(dial, 0.0, pose, k, ids, depth, 5)).reshape(-1, 3)
+    assert hidden[1, 2] == 1 and (hidden[[0, 2, 3], 2] == 2).all()
+    behind = pose.copy()
+    behind[2, 3] = -0.6
+    assert labels.gauge_keypoints(dial, 0.0, behind, k, ids, depth, 5) == [0.0, 0.0, 0] * len(labels.KEYPOINTS)

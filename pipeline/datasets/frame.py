@@ -126,6 +126,8 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         seen = labels.gauge_visibility(dial, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
         reading = plan.oil_levels[p["tag"]].get(dial.binding["variable"])
         angle = None if reading is None else pointer_angle(reading, dial.binding)
+        if angle is not None:
+            seen["keypoints"] = labels.gauge_keypoints(dial, angle, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
         if seen["visible"] and angle is not None:  # the pointer's rows as posed in this frame: the study's H numerator, true
             seen["pointer_rows_px"] = ctx["scene"].pointer_rows(p["tag"], shot.cam_pose, k)
             seen.update(labels.pointer_glare(labels.pointer_pixels(dial, angle, shot.cam_pose, k), clip))
@@ -149,6 +151,7 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         "gauges": gauges,
         "instances": int(len(np.unique(ids[ids > 0]))),
         **({"appearance": plan.look} if plan.look is not None else {}),
+        "gauge_keypoints": list(labels.KEYPOINTS),
         "glare": {"mask": f"glare/{fid}.png", "clipped_px": int(clip.sum()),
                   "definition": "1 where the sensor clips: the exposed radiance (render + lens veil) "
                                 "reaches full scale in a channel, before noise"},

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..perception.gauge import FACE_RADIUS
 from ..perception.gauge_reader import POINTER_OUTLINE, Dial
 from ..geometry.pinhole import project
 
@@ -18,6 +19,11 @@ DIAL_DEPTH_TOLERANCE_M = 0.25
 # glare hides a pointer when the sensor clipped at least this share of its pixels: a
 # reader sees a white blot there, not a dark line
 GLARE_HIDES_SHARE = 0.5
+
+# a gauge's keypoints, in COCO's order: the pointer's pivot, its tip (0.85 of the face
+# radius, the authored pointer's length), and the scale's ends on the tip's circle
+KEYPOINTS = ("dial_centre", "pointer_tip", "scale_start", "scale_end")
+TIP_RADIUS = 0.85 * FACE_RADIUS
 
 
 def instance_ids(placements: list[dict]) -> dict[str, int]:
@@ -101,3 +107,26 @@ def pointer_glare(pointer: np.ndarray, clipped: np.ndarray) -> dict:
     n = int(pointer.sum())
     share = float(clipped[pointer].mean()) if n else 0.0
     return {"pointer_px": n, "pointer_clipped_share": share, "glare_hides_pointer": bool(n and share >= GLARE_HIDES_SHARE)}
+
+
+def gauge_keypoints(dial: Dial, angle: float, cam_pose: np.ndarray, k: dict, ids: np.ndarray, depth: np.ndarray,
+                    instance: int) -> list[float]:
+    """COCO keypoints [x, y, v] * len(KEYPOINTS) of a gauge whose pointer is at `angle`:
+    v 2 where the point is on its own instance's surface at its depth (the glass in
+    front of the dial included), 1 in the frame but hidden, 0 (and x = y = 0) outside
+    the frame or behind the camera."""
+    r0, r1 = dial.binding["range"]
+    points = np.array([dial.centre, dial.centre + TIP_RADIUS * dial.direction(angle),
+                       dial.centre + TIP_RADIUS * dial.direction(r0), dial.centre + TIP_RADIUS * dial.direction(r1)])
+    uv = project(points, cam_pose, k)
+    facing = float(dial.axis @ (cam_pose[:3, 3] - dial.centre)) > 0.0
+    out: list[float] = []
+    for (u, v), point in zip(uv, points):
+        if np.isnan(u) or not (0 <= u < k["width"] and 0 <= v < k["height"]):
+            out += [0.0, 0.0, 0]
+            continue
+        expected = float(-(point - cam_pose[:3, 3]) @ cam_pose[:3, 2])
+        row, col = int(v), int(u)
+        seen = facing and ids[row, col] == instance and abs(float(depth[row, col]) - expected) <= DIAL_DEPTH_TOLERANCE_M
+        out += [float(u), float(v), 2 if seen else 1]
+    return out
