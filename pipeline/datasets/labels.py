@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..perception.gauge import FACE_RADIUS
 from ..perception.gauge_reader import POINTER_OUTLINE, Dial
 from ..geometry.pinhole import project
 
@@ -20,10 +19,10 @@ DIAL_DEPTH_TOLERANCE_M = 0.25
 # reader sees a white blot there, not a dark line
 GLARE_HIDES_SHARE = 0.5
 
-# a gauge's keypoints, in COCO's order: the pointer's pivot, its tip (0.85 of the face
-# radius, the authored pointer's length), and the scale's ends on the tip's circle
+# a gauge's keypoints, in COCO's order: the pointer's pivot, its tip (the authored
+# pointer's length), and the scale's ends on the tip's circle
 KEYPOINTS = ("dial_centre", "pointer_tip", "scale_start", "scale_end")
-TIP_RADIUS = 0.85 * FACE_RADIUS
+TIP_RADIUS = float(POINTER_OUTLINE[:, 1].max())
 
 
 def instance_ids(placements: list[dict]) -> dict[str, int]:
