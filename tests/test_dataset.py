@@ -191,6 +191,8 @@ def test_labels_are_exact_and_coco_loads(tiny_run):
         assert k[0, 2] == 48.0 and k[1, 2] == 36.0 and len(frame["camera"]["pose"]) == 4
         assert {g["tag"] for g in frame["gauges"]} >= {"RE-A1", "RE-A2"}
         assert all(0.0 <= g["reading"] <= 100.0 for g in frame["gauges"])
+        parts = cv2.imread(str(folder / frame["parts"]), cv2.IMREAD_UNCHANGED)
+        assert parts.dtype == np.uint16 and parts.shape == masks.shape
         # the glare mask beside the instance mask: 0/1, as many ones as the record says
         glare = cv2.imread(str(folder / frame["glare"]["mask"]), cv2.IMREAD_UNCHANGED)
         assert glare.dtype == np.uint8 and glare.shape == masks.shape and set(np.unique(glare)) <= {0, 1}
@@ -206,6 +208,19 @@ def test_labels_are_exact_and_coco_loads(tiny_run):
         # gauge is visible whenever the dial's centre pixel is the dial at its depth
         target = frame["camera"]["target"]
         assert any(a["tag"] == target for a in anns)
+    # every part annotation decodes to its part of its instance, and every such pair has one
+    part_coco = json.loads((folder / "coco_parts.json").read_text())
+    assert {c["name"] for c in part_coco["categories"]} >= {"gauge_pointer", "gauge_glass", "bushing"}
+    for image, frame in zip(part_coco["images"], frames):
+        masks = cv2.imread(str(folder / frame["mask"]), cv2.IMREAD_UNCHANGED)
+        parts = cv2.imread(str(folder / frame["parts"]), cv2.IMREAD_UNCHANGED)
+        anns = [a for a in part_coco["annotations"] if a["image_id"] == image["id"]]
+        pairs = {(int(i), int(p)) for i, p in zip(masks.ravel(), parts.ravel()) if i and p}
+        assert {(a["instance_id"], a["category_id"]) for a in anns} == pairs
+        for a in anns:
+            pixels = (masks == a["instance_id"]) & (parts == a["category_id"])
+            assert np.array_equal(rle.decode(a["segmentation"]).astype(bool), pixels)
+    assert any(a["category_id"] for a in part_coco["annotations"])  # the tiny frames see gauge parts
 
 
 @pytest.mark.slow
@@ -569,3 +584,38 @@ def test_gauge_keypoints_are_projected_with_their_visibility():
     behind = pose.copy()
     behind[2, 3] = -0.6
     assert labels.gauge_keypoints(dial, 0.0, behind, k, ids, depth, 5) == [0.0, 0.0, 0] * len(labels.KEYPOINTS)
+
+
+# --- parts (issue 38 item 1; no rendering) --------------------------------------------------
+
+
+def test_parts_come_from_the_packages_object_names():
+    from pipeline.datasets import labels
+
+    pid = labels.PART_ID
+    assert labels.part_of("gauge_tank_pointer") == pid["gauge_pointer"]
+    assert labels.part_of("gauge_tank_glass") == pid["gauge_glass"]
+    assert labels.part_of("gauge_tank_dial_red") == labels.part_of("gauge_tank_dial_white") == pid["gauge_dial"]
+    assert labels.part_of("gauge_b1_oil") == labels.part_of("gauge_b2_tube") == pid["sight_glass"]
+    assert labels.part_of("bushing_hv_sheds") == pid["bushing"]  # a bushing's sheds are the bushing's
+    assert labels.part_of("column_1_insulator") == labels.part_of("chamber_2_insulator") == pid["insulator"]
+    assert labels.part_of("base_tank") == labels.part_of("conservator") == 0
+    assert [c["id"] for c in labels.part_categories()] == list(range(1, len(labels.PARTS) + 1))
+
+
+def test_part_annotations_name_their_parent_instance():
+    from pycocotools import mask as rle
+
+    from pipeline.datasets import labels
+
+    ids = np.zeros((6, 8), np.uint16)
+    parts = np.zeros((6, 8), np.uint16)
+    ids[1:5, 1:7] = 3  # an instance with a pointer and a glass part, and some of it no part
+    parts[1:3, 2:4] = labels.PART_ID["gauge_pointer"]
+    parts[3:5, 5:7] = labels.PART_ID["gauge_glass"]
+    parts[0, 0] = labels.PART_ID["gauge_glass"]  # a part on the background is no one's
+    anns = labels.part_annotations(ids, parts, {3: "RE-A1"})
+    assert [(a["instance_id"], a["tag"], a["category_id"]) for a in anns] == [
+        (3, "RE-A1", labels.PART_ID["gauge_pointer"]), (3, "RE-A1", labels.PART_ID["gauge_glass"])]
+    assert anns[0]["bbox"] == [2, 1, 2, 2] and anns[0]["area"] == 4
+    assert np.array_equal(rle.decode(anns[1]["segmentation"]).astype(bool), (ids == 3) & (parts == 2))

@@ -52,6 +52,7 @@ def _context(job: dict) -> dict:
     scene.add_lamps([p["tag"] for p in site.placements if p["asset"] == "lighting_pole"])
     ids = labels.instance_ids(site.placements)
     scene.set_instances(ids)
+    scene.set_parts({tag: {name: labels.part_of(name) for name in objs} for tag, objs in scene.objects.items()})
     if cfg.appearance is not None:
         appearance.prepare(scene)
     cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
@@ -90,14 +91,16 @@ def _frame(ctx: dict, folder: Path, plan: FramePlan, labels_as_lights: bool = Fa
     rgb = develop(linear, gain, veil, wb, cam, seed=plan.seed)
     clip = clipped(linear, gain, veil, wb)
     t2 = time.perf_counter()
-    ids, depth = scene.render_labels(as_lights=labels_as_lights)
+    ids, depth, parts = scene.render_labels(as_lights=labels_as_lights)
     t3 = time.perf_counter()
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
     record = _record(ctx, plan, k, ids, depth, gain, wb, float(veil.mean()), clip)
+    record["part_annotations"] = labels.part_annotations(ids, parts, ctx["tag_of"])
     fid = plan.frame_id
     _write_png(folder / "images" / f"{fid}.png", rgb[..., ::-1])
     _write_png(folder / "masks" / f"{fid}.png", ids)
     _write_png(folder / "glare" / f"{fid}.png", clip.astype(np.uint8))
+    _write_png(folder / "parts" / f"{fid}.png", parts)
     with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
         with open(tmp, "wb") as fh:
             np.save(fh, depth, allow_pickle=False)
@@ -151,6 +154,7 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         "gauges": gauges,
         "instances": int(len(np.unique(ids[ids > 0]))),
         **({"appearance": plan.look} if plan.look is not None else {}),
+        "parts": f"parts/{fid}.png",
         "gauge_keypoints": list(labels.KEYPOINTS),
         "glare": {"mask": f"glare/{fid}.png", "clipped_px": int(clip.sum()),
                   "definition": "1 where the sensor clips: the exposed radiance (render + lens veil) "

@@ -3,10 +3,13 @@
     OUT/datasets/<name>/
         images/<frame_id>.png    the phone's picture (8-bit sRGB)
         masks/<frame_id>.png     16-bit instance ids, 0 = background
+        parts/<frame_id>.png     16-bit part ids (labels.PARTS), 0 = no part; with the instance
+                                 mask: which part of which instance
         glare/<frame_id>.png     8-bit, 1 where the sensor clipped (sensor.clipped), else 0
         depth/<frame_id>.npy     float32 planar depth (m) along the optical axis, inf = sky
         records/<frame_id>.json  one frame's labels and annotations (what a resumed run keeps)
-        frames.jsonl, coco.json  the first N frames' records, assembled at the end
+        frames.jsonl, coco.json  the first N frames' records, assembled at the end; coco_parts.json:
+                                 the parts' COCO annotations, each naming its parent instance
         dataset.json             config digest, frames, renderer; timings.json: seconds
 
 Frames are independent tasks: frame i is a function of (config, built scene, i) alone
@@ -44,7 +47,7 @@ from .plan import Planner, frame_id
 from ..runtime.site import Site, load_site
 
 RENDERER = "blender-cycles-cpu"
-FOLDERS = ("images", "masks", "glare", "depth", "records")
+FOLDERS = ("images", "masks", "parts", "glare", "depth", "records")
 THREADS = 2  # a frame's (CyclesScene.THREADS): the native thread pools of its worker get as many
 
 
@@ -128,13 +131,13 @@ def _claim(folder: Path, cfg) -> None:
 def _done(folder: Path, index: int) -> bool:
     fid = frame_id(index)
     return all((folder / p).is_file() for p in (f"records/{fid}.json", f"images/{fid}.png", f"masks/{fid}.png",
-                                                f"glare/{fid}.png", f"depth/{fid}.npy"))
+                                                f"parts/{fid}.png", f"glare/{fid}.png", f"depth/{fid}.npy"))
 
 
 def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
     records = [json.loads((folder / "records" / f"{frame_id(i)}.json").read_text()) for i in range(n)]
-    lines = [json.dumps({k: v for k, v in r.items() if k != "annotations"}, sort_keys=True,
-                        separators=(",", ":")) for r in records]
+    lines = [json.dumps({k: v for k, v in r.items() if k not in ("annotations", "part_annotations")},
+                        sort_keys=True, separators=(",", ":")) for r in records]
     atomic_write(folder / "frames.jsonl", "\n".join(lines) + "\n")
     images, anns = [], []
     for i, r in enumerate(records):
@@ -147,6 +150,11 @@ def _assemble(folder: Path, cfg, site: Site, n: int) -> None:
             "licenses": [], "images": images, "annotations": anns,
             "categories": labels.categories(site.manifests)}
     atomic_write(folder / "coco.json", json.dumps(coco, sort_keys=True, separators=(",", ":")) + "\n")
+    parts = [{"image_id": i + 1, **a} for i, r in enumerate(records) for a in r.get("part_annotations", [])]
+    parts = [{"id": j + 1, **a} for j, a in enumerate(parts)]
+    atomic_write(folder / "coco_parts.json", json.dumps(
+        {**coco, "annotations": parts, "categories": labels.part_categories()},
+        sort_keys=True, separators=(",", ":")) + "\n")
 
 
 def _render(cfg, job: dict, todo: list[int], per_process: int, executor: str, scheduler: str | None,
