@@ -131,11 +131,12 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         angle = None if reading is None else pointer_angle(reading, dial.binding)
         if angle is not None:
             seen["keypoints"] = labels.gauge_keypoints(dial, angle, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
-        if seen["visible"] and angle is not None:  # the pointer's rows as posed in this frame: the study's H numerator, true
+        # the pointer's rows as posed in this frame: the study's H numerator, true
+        if seen["visible"] and angle is not None:
             seen["pointer_rows_px"] = ctx["scene"].pointer_rows(p["tag"], shot.cam_pose, k)
             seen.update(labels.pointer_glare(labels.pointer_pixels(dial, angle, shot.cam_pose, k), clip))
-        gauges.append({"tag": p["tag"], "reading": reading, "unit": "%", "pointer_angle_deg": None if angle is None else math.degrees(angle),
-                       **seen})
+        gauges.append({"tag": p["tag"], "reading": reading, "unit": "%",
+                       "pointer_angle_deg": None if angle is None else math.degrees(angle), **seen})
     kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
     return {
         "frame_id": fid, "index": plan.index, "seed": plan.seed,

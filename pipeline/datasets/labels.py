@@ -148,7 +148,8 @@ def pointer_glare(pointer: np.ndarray, clipped: np.ndarray) -> dict:
     """The share of the pointer's pixels the sensor clipped, and whether that hides it."""
     n = int(pointer.sum())
     share = float(clipped[pointer].mean()) if n else 0.0
-    return {"pointer_px": n, "pointer_clipped_share": share, "glare_hides_pointer": bool(n and share >= GLARE_HIDES_SHARE)}
+    return {"pointer_px": n, "pointer_clipped_share": share,
+            "glare_hides_pointer": bool(n and share >= GLARE_HIDES_SHARE)}
 
 
 def gauge_keypoints(dial: Dial, angle: float, cam_pose: np.ndarray, k: dict, ids: np.ndarray, depth: np.ndarray,

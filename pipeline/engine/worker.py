@@ -63,12 +63,13 @@ def memory_limit() -> int | None:
 
 def run_task(action, args: dict, staging: str | None, cores: int | None = None) -> dict:
     """One task, wherever it runs: `action(staging=..., **args)`, or `action(**args)`
-    for a call that writes no staging folder (`staging` None: a dataset's frame). User errors come back as data (with the file and
-    the object they name) so the scheduler reports them; running out of memory is
-    such a failure too; a bug keeps its trace for the report, not the user's screen.
-    `cores`: the task's share of the cores for fork_join.beside and spread, which the
-    scheduler gives when it submits the task (all of the build's to a task that
-    starts with nothing beside it, the scene at the end of a cold build)."""
+    for a call that writes no staging folder (`staging` None: a dataset's frame). User
+    errors come back as data (with the file and the object they name) so the scheduler
+    reports them; running out of memory is such a failure too; a bug keeps its trace for
+    the report, not the user's screen. `cores`: the task's share of the cores for
+    fork_join.beside and spread, which the scheduler gives when it submits the task (all
+    of the build's to a task that starts with nothing beside it, the scene at the end of
+    a cold build)."""
     before = os.environ.get(SHARE_VARIABLE)
     if cores is not None:
         os.environ[SHARE_VARIABLE] = str(cores)
