@@ -203,17 +203,14 @@ def dataset(config: Path, sources: Path, out: Path, frames: int | None, executor
             workers: int):
     """Render a labelled image set (images, instance masks, depth, COCO, frames.jsonl)
     from the built scene OUT into OUT/datasets/<name>/; a stopped run resumes."""
-    from .datasets.run import blender_log, dask_frames, run_dataset
+    from .datasets.run import blender_log, run_dataset
 
     from .progress import bar
 
-    pool = None
-    if executor == "dask":
-        from .engine.dask_executor import dask_executor
-
-        pool = dask_frames(dask_executor, scheduler)
+    if scheduler is not None and executor != "dask":
+        raise click.BadParameter("a scheduler is for --executor dask", param_hint="--scheduler")
     with bar("frames") as progress:
-        folder = run_dataset(config, out, frames=frames, pool=pool, executor=executor, workers=workers,
+        folder = run_dataset(config, out, frames=frames, executor=executor, scheduler=scheduler, workers=workers,
                              sources=sources, progress=progress.update)
     click.echo(f"Blender's log: {blender_log(out, folder.name)}", err=True)
     click.echo(str(folder))

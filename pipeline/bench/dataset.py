@@ -6,7 +6,11 @@ same frames rendered side by side by:
 - dask_1, dask_2:   dask.distributed (a LocalCluster) with one and two workers;
 - per_frame:        the study's own method: a fresh Blender per frame that imports
                     the scene's packages again and renders once (one worker replaced
-                    after every frame).
+                    after every frame);
+- labels_before:    local_1 with the label pass as it was before issue 38 (its
+                    emission sampled as light: a light tree over every triangle), in
+                    the same bench run: `labels` compares the two per frame (the
+                    label pass's share, and after/before), the files being identical.
 
 Each run starts from an empty dataset folder; every run's files must be byte-identical
 to local_1's (recorded). The quick mode renders 2 frames at 160x120."""
@@ -23,7 +27,7 @@ from .context import Context
 
 CONFIG = Path("datasets") / "inspection_route.toml"
 RUNS = (("local_1", "local", 1, None), ("local_2", "local", 2, None), ("dask_1", "dask", 1, None),
-        ("dask_2", "dask", 2, None), ("per_frame", "local", 1, 1))
+        ("dask_2", "dask", 2, None), ("per_frame", "local", 1, 1), ("labels_before", "local", 1, None))
 
 
 def _config(source: Path, dst: Path, frames: int, width: int, height: int) -> Path:
@@ -42,8 +46,7 @@ def _files(folder: Path) -> dict[str, bytes]:
 
 
 def dataset_section(ctx: Context) -> dict:
-    from ..engine.dask_executor import dask_executor
-    from ..datasets.run import dask_frames, run_dataset
+    from ..datasets.run import run_dataset
 
     built = ctx.built or ctx.out
     source = ctx.sources / CONFIG
@@ -59,9 +62,8 @@ def dataset_section(ctx: Context) -> dict:
         for sub in ("models", "scene"):
             (out / sub).symlink_to(built / sub)
         t0 = time.perf_counter()
-        pool = dask_frames(dask_executor) if executor == "dask" else None
-        folder = run_dataset(config, out, pool=pool, executor=executor, workers=workers, tasks_per_worker=tasks,
-                             sources=ctx.sources)
+        folder = run_dataset(config, out, executor=executor, workers=workers, tasks_per_worker=tasks,
+                             sources=ctx.sources, labels_as_lights=name == "labels_before")
         wall = time.perf_counter() - t0
         timings = json.loads((folder / "timings.json").read_text())
         files = _files(folder)
@@ -74,9 +76,19 @@ def dataset_section(ctx: Context) -> dict:
             # a worker's first frame loads the scene; the rest show the steady cost
             "first_frame_s": max(per_frame), "steady_frame_median_s": statistics.median(per_frame[:-workers] or per_frame),
             "plan_s": timings["plan_s"], "scene_placements": timings["scene_placements"],
+            "render_median_s": statistics.median(timings["render_s"]),
+            "labels_median_s": statistics.median(timings["labels_s"]),
             "identical_to_local_1": files == reference}
     base = runs["local_1"]["seconds_per_frame"]
-    return {"frame": f"{width}x{height}, labels included", "config": str(CONFIG), "runs": runs,
+    before, after = runs["labels_before"], runs["local_1"]
+    labels = {"before": {k: before[k] for k in ("steady_frame_median_s", "render_median_s", "labels_median_s")},
+              "after": {k: after[k] for k in ("steady_frame_median_s", "render_median_s", "labels_median_s")},
+              "label_share_before": before["labels_median_s"] / (before["render_median_s"] + before["labels_median_s"]),
+              "label_share_after": after["labels_median_s"] / (after["render_median_s"] + after["labels_median_s"]),
+              "frame_after_to_before": after["steady_frame_median_s"] / before["steady_frame_median_s"],
+              "labels_after_to_before": after["labels_median_s"] / before["labels_median_s"],
+              "identical": before["identical_to_local_1"]}
+    return {"labels": labels, "frame": f"{width}x{height}, labels included", "config": str(CONFIG), "runs": runs,
             "ratios": {"dask_2_to_local_2": runs["dask_2"]["seconds_per_frame"] / runs["local_2"]["seconds_per_frame"],
                        "dask_1_to_local_1": runs["dask_1"]["seconds_per_frame"] / base,
                        "throughput_2_to_1_workers": runs["local_2"]["frames_per_minute"]

@@ -63,7 +63,19 @@ def _dataset_rows(d):
             _row("dataset", "s per frame, 2 workers", r["local_2"]["seconds_per_frame"],
                  r["local_1"]["seconds_per_frame"], "s", "1 worker", note),
             _row("dataset", "s per frame, scene kept", r["local_1"]["seconds_per_frame"],
-                 r["per_frame"]["seconds_per_frame"], "s", "the study's method: import and render per frame", note)]
+                 r["per_frame"]["seconds_per_frame"], "s", "the study's method: import and render per frame", note),
+            *_label_rows(d.get("labels"), r, note)]
+
+
+def _label_rows(labels, r, note):
+    """The label pass after issue 38 against the one before, measured in the same run."""
+    if not labels or "labels_before" not in r:
+        return []
+    same = note + ("; identical files" if labels["identical"] else "; FILES DIFFER")
+    return [_row("dataset", "s per frame, labels included", labels["after"]["steady_frame_median_s"],
+                 labels["before"]["steady_frame_median_s"], "s", "the label pass sampled as light (before)", same),
+            _row("dataset", "s per label pass", labels["after"]["labels_median_s"],
+                 labels["before"]["labels_median_s"], "s", "the label pass sampled as light (before)", same)]
 
 
 def _viewer_rows(d):

@@ -5,6 +5,10 @@ what conditions and equipment states to sample, how many frames, and the seed.
     [sensor]     width, height, samples, render_denoise, tasks_per_worker
     [conditions] dates, local_time = [from, to], tau_atm = [lo, hi], aerosol = [lo, hi]
     [states]     oil_level = [lo, hi] (%), switch_open = probability
+    [appearance] per instance: colour_jitter, roughness_jitter, dirt, rust, oil_stains,
+                 weathering = [lo, hi]; per frame: sky = {clear, overcast, hazy} weights,
+                 exposure_ev = [lo, hi], vignetting = [lo, hi] (optional: without it
+                 every piece of equipment looks as its package made it)
     [[cameras]]  kind = "inspection_point" | "route" | "ptz", weight, zoom = [lo, hi], ...
 
 Read through `config.read_config` against schemas/dataset.schema.json (the keys, their
@@ -52,6 +56,31 @@ class States:
 
 
 @dataclass(frozen=True)
+class Appearance:
+    """How equipment and skies vary, drawn per frame (plan.py). Per instance:
+    colour_jitter scales each base colour channel by 1 + U(-j, j); roughness_jitter adds
+    U(-j, j) to roughness; dirt, rust, oil_stains, weathering: each an amount in 0..1
+    drawn from its range (procedural masks in the materials, render/appearance.py).
+    Per frame: a sky kind from the weights (overcast dims the sun behind cloud and
+    greys the sky, hazy thickens the aerosol), an exposure compensation in EV on the
+    metered gain, and the lens's vignetting (the corners' light lost, 0..0.6)."""
+
+    colour_jitter: tuple[float, float] = (0.0, 0.0)
+    roughness_jitter: tuple[float, float] = (0.0, 0.0)
+    dirt: tuple[float, float] = (0.0, 0.0)
+    rust: tuple[float, float] = (0.0, 0.0)
+    oil_stains: tuple[float, float] = (0.0, 0.0)
+    weathering: tuple[float, float] = (0.0, 0.0)
+    sky: tuple[tuple[str, float], ...] = (("clear", 1.0),)
+    exposure_ev: tuple[float, float] = (0.0, 0.0)
+    vignetting: tuple[float, float] = (0.0, 0.0)
+
+
+INSTANCE_KEYS = ("colour_jitter", "roughness_jitter", "dirt", "rust", "oil_stains", "weathering")
+RANGE_KEYS = (*INSTANCE_KEYS, "exposure_ev", "vignetting")
+
+
+@dataclass(frozen=True)
 class CameraFamily:
     """One camera family. inspection_point: `points` (site.toml names; all when empty)
     looking at their targets. route: a polyline `path` of plan (x, y) on `level`,
@@ -82,6 +111,7 @@ class DatasetConfig:
     conditions: Conditions
     states: States
     cameras: tuple[CameraFamily, ...]
+    appearance: Appearance | None = None  # None: no [appearance] table, materials as imported
     digest: str = field(default="")  # sha256 of the file: what a resumed run must match
 
 
@@ -100,6 +130,7 @@ def load(path: str | Path) -> DatasetConfig:
                               _pair(cond["tau_atm"]), _pair(cond["aerosol"])),
         states=States(_pair(states["oil_level"]), float(states["switch_open"])),
         cameras=tuple(_camera(c) for c in data["cameras"]),
+        appearance=_appearance(data["appearance"]) if "appearance" in data else None,
         digest=hashlib.sha256(path.read_bytes()).hexdigest())
 
 
@@ -128,6 +159,11 @@ def _problems(data: dict) -> list[tuple[str, str]]:
     ranges = [("conditions.tau_atm", cond["tau_atm"]), ("conditions.aerosol", cond["aerosol"]),
               ("states.oil_level", data["states"]["oil_level"])]
     ranges += [(f"cameras[{i}].zoom", c["zoom"]) for i, c in enumerate(data["cameras"])]
+    look = data.get("appearance")
+    if look is not None:
+        ranges += [(f"appearance.{k}", look[k]) for k in RANGE_KEYS]
+        if sum(look["sky"].values()) <= 0:
+            out.append(("appearance.sky", "the weights sum to 0: give at least one sky a weight above 0"))
     for key, value in ranges:
         lo, hi = _pair(value)
         if lo > hi:
@@ -139,6 +175,11 @@ def _pair(value) -> tuple[float, float]:
     """A range as the schema allows it: one number (lo = hi) or [lo, hi]."""
     lo, hi = (value, value) if isinstance(value, (int, float)) else value
     return float(lo), float(hi)
+
+
+def _appearance(t: dict) -> Appearance:
+    return Appearance(**{k: _pair(t[k]) for k in RANGE_KEYS},
+                      sky=tuple((kind, float(t["sky"][kind])) for kind in sorted(t["sky"])))
 
 
 def _camera(t: dict) -> CameraFamily:

@@ -40,6 +40,7 @@ class FramePlan:
     oil_levels: dict[str, dict[str, float]]  # tag -> variable -> %
     switches: dict[str, str]  # tag -> "open" | "closed"
     visible_tags: list[str] = field(default_factory=list)  # what the frame loads (culled)
+    look: dict | None = None  # the config's [appearance] drawn for this frame (appearance()), None without
 
 
 def frame_id(index: int) -> str:
@@ -117,6 +118,8 @@ class Planner:
         plan = FramePlan(index, frame_id(index), frame_seed(cfg, index), f"{cam.kind}:{name}", shot, aerosol, tau,
                          oil, switches)
         plan.visible_tags = self._visible(shot)
+        if cfg.appearance is not None:
+            plan.look = appearance(cfg.appearance, cfg.seed, index, plan.visible_tags)
         return plan
 
     def _when(self, rng: np.random.Generator) -> dt.datetime:
@@ -236,3 +239,26 @@ def switch_angles(manifest: dict, position: str) -> dict[str, float]:
         far = lo if abs(lo) > abs(hi) else hi
         out[j["name"]] = far if position == "open" else closed
     return out
+
+
+def appearance(look, seed: int, index: int, tags: list[str]) -> dict:
+    """Frame `index`'s draw of a config's [appearance]: a stream of its own (the
+    frame's other draws are those of a config without one), each instance's values
+    drawn in tag order. {"instances": {tag: {tint: [r, g, b], offset (of its stains'
+    noise, m), roughness, dirt, rust, oil_stains, weathering}}, "sky", "exposure_ev",
+    "vignetting"}."""
+    rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, index, 2])))
+    kinds = [k for k, _ in look.sky]
+    weights = np.array([w for _, w in look.sky], float)
+    sky = kinds[int(rng.choice(len(kinds), p=weights / weights.sum()))]
+    exposure = float(rng.uniform(*look.exposure_ev))
+    vignetting = float(rng.uniform(*look.vignetting))
+    instances = {}
+    for tag in sorted(tags):
+        c, r = rng.uniform(*look.colour_jitter), rng.uniform(*look.roughness_jitter)
+        instances[tag] = {"tint": [round(float(1.0 + v), 4) for v in rng.uniform(-c, c, 3)],
+                          "offset": [round(float(v), 3) for v in rng.uniform(0.0, 100.0, 3)],
+                          "roughness": round(float(rng.uniform(-r, r)), 4),
+                          **{k: round(float(rng.uniform(*getattr(look, k))), 4)
+                             for k in ("dirt", "rust", "oil_stains", "weathering")}}
+    return {"instances": instances, "sky": sky, "exposure_ev": round(exposure, 4), "vignetting": round(vignetting, 4)}

@@ -3,9 +3,13 @@
     OUT/datasets/<name>/
         images/<frame_id>.png    the phone's picture (8-bit sRGB)
         masks/<frame_id>.png     16-bit instance ids, 0 = background
+        parts/<frame_id>.png     16-bit part ids (labels.PARTS), 0 = no part; with the instance
+                                 mask: which part of which instance
+        glare/<frame_id>.png     8-bit, 1 where the sensor clipped (sensor.clipped), else 0
         depth/<frame_id>.npy     float32 planar depth (m) along the optical axis, inf = sky
         records/<frame_id>.json  one frame's labels and annotations (what a resumed run keeps)
-        frames.jsonl, coco.json  the first N frames' records, assembled at the end
+        frames.jsonl, coco.json  the first N frames' records, assembled at the end; coco_parts.json:
+                                 the parts' COCO annotations, each naming its parent instance
         dataset.json             config digest, frames, renderer; timings.json: seconds
 
 Frames are independent tasks: frame i is a function of (config, built scene, i) alone
@@ -17,47 +21,49 @@ executor, the number of workers or the order, a run of N frames is the first N o
 longer one, and a killed run resumes by rendering the frames whose record is missing
 (every file is written by rename; the record last). Only the frames asked for are
 planned (--frames N plans N, whatever the config's count).
+
+Frames are the engine's tasks like a build's (engine.worker.run_task on the executors
+of engine.executors: one pool, one worker set-up, a dead worker reported as the
+build reports one); each worker hands its frames to a Blender subprocess of its own
+(blender_process.py, frame.py), which also runs under a dask worker's nanny.
 """
 
 from __future__ import annotations
 
+import functools
 import json
-import math
 import os
-import sys
 import time
-from concurrent.futures import Executor, as_completed
-from contextlib import contextmanager
+from concurrent.futures import as_completed
 from pathlib import Path
-from typing import Callable, ContextManager, Iterator
 
-import numpy as np
-
+from ..engine.executors import EXECUTORS, outcome
+from ..engine.worker import Workers, run_task
 from ..errors import UserError
-from ..files import atomic_path, atomic_write
+from ..files import atomic_write
 from . import config as dataset_config, labels
-from .plan import FramePlan, Planner, frame_id, switch_angles
-from ..perception.gauge import dial_of
-from ..geometry.pinhole import intrinsics
-from ..render.sensor import PhoneCamera
+from .blender_process import render_frame
+from .plan import Planner, frame_id
 from ..runtime.site import BuiltSite, load_site
 
 RENDERER = "blender-cycles-cpu"
-FramePool = Callable[[int, int], ContextManager[Executor]]  # (workers, frames a worker renders before it goes)
-FOLDERS = ("images", "masks", "depth", "records")
+FOLDERS = ("images", "masks", "parts", "glare", "depth", "records")
+THREADS = 2  # a frame's (CyclesScene.THREADS): the native thread pools of its worker get as many
 
 
 # --- the run (the calling process) -------------------------------------------------------
 
 
-def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool | None = None,
-                executor: str = "local", workers: int = 1, tasks_per_worker: int | None = None,
-                sources: Path, progress=None) -> Path:
+def run_dataset(config_path, out, *, frames: int | None = None, executor: str = "local",
+                scheduler: str | None = None, workers: int = 1, tasks_per_worker: int | None = None,
+                sources: Path, progress=None, labels_as_lights: bool = False) -> Path:
     """Render the config's first `frames` frames (all by default) that are not on disk
     yet, then write frames.jsonl and coco.json. Returns the dataset's folder.
-    `pool`: where frames render (default local_frames, spawned processes here; see
-    dask_frames); `executor`: its name in timings.json; `tasks_per_worker`: frames a
-    Blender process renders before it is replaced (default: the config's)."""
+    Frames run on the engine's executors (`executor`: "local", "dask" on a
+    LocalCluster or on the cluster at `scheduler`, "in-process"), `workers` at once,
+    each in a Blender subprocess of its worker (blender_process.py); `tasks_per_worker`:
+    frames a Blender process renders before it is replaced (default: the config's);
+    `labels_as_lights`: the label pass as it was before (the bench's "before")."""
     cfg = dataset_config.load(config_path)
     n = cfg.count if frames is None else frames
     if not 1 <= n <= cfg.count:
@@ -76,31 +82,25 @@ def run_dataset(config_path, out, *, frames: int | None = None, pool: FramePool 
     log = blender_log(out, cfg.name)
     log.parent.mkdir(parents=True, exist_ok=True)
     log.write_bytes(b"")  # this run's
-    job = {"build": str(out), "sources": str(sources), "config": str(Path(config_path).resolve()),
-           "folder": str(folder), "union": union, "log": str(log)}
+    # absolute: a worker of a cluster started elsewhere has a working folder of its own
+    job = {"build": os.path.abspath(out), "sources": os.path.abspath(sources),
+           "config": str(Path(config_path).resolve()), "folder": os.path.abspath(folder), "union": union,
+           "log": os.path.abspath(log), **({"labels_as_lights": True} if labels_as_lights else {})}
     if progress:
         progress(0, len(todo))
     t0 = time.perf_counter()
-    seconds = []
+    seconds, parts = [], []
     if todo:
-        with (pool or local_frames)(workers, tasks_per_worker or cfg.sensor.tasks_per_worker) as frame_pool:
-            futures = [frame_pool.submit(render_frame, job, i) for i in todo]
-            for f in as_completed(futures):
-                try:
-                    result = f.result()
-                except Exception as e:  # noqa: BLE001 - a worker that died (a crash, killed for memory)
-                    raise UserError(cfg.path, "frames", f"a worker stopped: {type(e).__name__}: {e} "
-                                                        f"(Blender's log: {log})") from None
-                if not result["ok"]:
-                    raise UserError(cfg.path, f"frame {result['frame_id']}", result["error"])
-                seconds.append(result["seconds"])
-                if progress:
-                    progress(len(seconds), len(todo))
+        per_process = tasks_per_worker or cfg.sensor.tasks_per_worker
+        parts = _render(cfg, job, todo, per_process, executor, scheduler, workers, log, progress)
+        seconds = [p["seconds"] for p in parts]
     wall = time.perf_counter() - t0
     _assemble(folder, cfg, site, n)
     atomic_write(folder / "timings.json", json.dumps(
         {"frames": n, "rendered": len(todo), "executor": executor, "workers": workers, "plan_s": plan_s,
-         "wall_s": wall, "frame_s": seconds, "scene_placements": len(union)}, indent=1, sort_keys=True) + "\n")
+         "wall_s": wall, "frame_s": seconds, "scene_placements": len(union),
+         "render_s": [p.get("render_s") for p in parts], "labels_s": [p.get("labels_s") for p in parts]},
+        indent=1, sort_keys=True) + "\n")
     return folder
 
 
@@ -131,13 +131,13 @@ def _claim(folder: Path, cfg) -> None:
 def _done(folder: Path, index: int) -> bool:
     fid = frame_id(index)
     return all((folder / p).is_file() for p in (f"records/{fid}.json", f"images/{fid}.png", f"masks/{fid}.png",
-                                                f"depth/{fid}.npy"))
+                                                f"parts/{fid}.png", f"glare/{fid}.png", f"depth/{fid}.npy"))
 
 
 def _assemble(folder: Path, cfg, site: BuiltSite, n: int) -> None:
     records = [json.loads((folder / "records" / f"{frame_id(i)}.json").read_text()) for i in range(n)]
-    lines = [json.dumps({k: v for k, v in r.items() if k != "annotations"}, sort_keys=True,
-                        separators=(",", ":")) for r in records]
+    lines = [json.dumps({k: v for k, v in r.items() if k not in ("annotations", "part_annotations")},
+                        sort_keys=True, separators=(",", ":")) for r in records]
     atomic_write(folder / "frames.jsonl", "\n".join(lines) + "\n")
     images, anns = [], []
     for i, r in enumerate(records):
@@ -150,267 +150,33 @@ def _assemble(folder: Path, cfg, site: BuiltSite, n: int) -> None:
             "licenses": [], "images": images, "annotations": anns,
             "categories": labels.categories(site.manifests)}
     atomic_write(folder / "coco.json", json.dumps(coco, sort_keys=True, separators=(",", ":")) + "\n")
+    parts = [{"image_id": i + 1, **a} for i, r in enumerate(records) for a in r.get("part_annotations", [])]
+    parts = [{"id": j + 1, **a} for j, a in enumerate(parts)]
+    atomic_write(folder / "coco_parts.json", json.dumps(
+        {**coco, "annotations": parts, "categories": labels.part_categories()},
+        sort_keys=True, separators=(",", ":")) + "\n")
 
 
-def dask_frames(dask_executor, scheduler: str | None = None) -> FramePool:
-    """Frames on dask.distributed through `dask_executor` (the builder's; handed in,
-    since the runtime does not import the builder): a LocalCluster, or the cluster at
-    `scheduler`, whose workers see OUT and the sources at the same paths.
-
-    A dask worker runs tasks on threads, and Blender renders on its main thread only:
-    each worker keeps one Blender process of its own (a one-process pool, replaced
-    after `tasks_per_worker` frames), which a worker may start only when it is not a
-    daemon (`distributed.worker.daemon: false` for workers started elsewhere)."""
-
-    @contextmanager
-    def pool(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
-        import dask
-        import distributed  # noqa: F401 - its config defaults load before one of them is set
-
-        with dask.config.set({"distributed.worker.daemon": False}):
-            with dask_executor(workers, scheduler) as executor:
-                yield _InBlenderProcess(executor, tasks_per_worker)
-
-    return pool
-
-
-@contextmanager
-def local_frames(workers: int, tasks_per_worker: int) -> Iterator[Executor]:
-    """Spawned processes (Blender does not survive a fork), each replaced after
-    `tasks_per_worker` frames, so a long run's memory stays that of a fresh one."""
-    import multiprocessing
-    import shutil
-    from concurrent.futures import ProcessPoolExecutor
-
-    from ..scratch import pool_folder
-
-    temp = pool_folder()  # the scratch frames and Blender's session folders, whatever becomes of a process
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               max_tasks_per_child=tasks_per_worker, initializer=init_blender_process,
-                               initargs=(temp,))
+def _render(cfg, job: dict, todo: list[int], per_process: int, executor: str, scheduler: str | None,
+            workers: int, log: Path, progress) -> list[dict]:
+    """Frames `todo` on the engine's executor, each a run_task call; the first failure
+    (a frame's own, or a dead worker) stops the run with the frame it names."""
+    factory = EXECUTORS[executor]
+    if scheduler is not None:
+        factory = functools.partial(factory, scheduler=scheduler)
+    pool = factory(Workers(count=workers, threads=THREADS))
+    seconds = []
     try:
-        yield pool
+        futures = {pool.submit(run_task, render_frame, {"job": job, "index": i, "tasks_per_worker": per_process},
+                               None): i for i in todo}
+        for f in as_completed(futures):
+            result = outcome(f)
+            if not result["ok"]:
+                why = result.get("user_error") or result["error"]
+                raise UserError(cfg.path, f"frame {frame_id(futures[f])}", f"{why} (Blender's log: {log})")
+            seconds.append({**result["result"], "seconds": result["seconds"]})
+            if progress:
+                progress(len(seconds), len(todo))
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
-        shutil.rmtree(temp, ignore_errors=True)
-
-
-def init_blender_process(temp: str | None = None) -> None:
-    """A spawned child starts with its parent's sys.path: when the parent imported bpy,
-    that holds Blender's scripts/modules, whose pure-Python `bpy` package would shadow
-    the real one (No module named '_bpy'). Those entries go; importing bpy adds them back.
-    Its temporary files go to a folder of its own in `temp` (scratch)."""
-    import sys
-
-    from ..scratch import use_temp_folder
-
-    sys.path[:] = [p for p in sys.path if f"{os.sep}bpy{os.sep}" not in p]
-    use_temp_folder(temp)
-    _exit_with_parent()
-
-
-def _exit_with_parent() -> None:
-    """A Blender process ends when the process that started it is gone (a dask
-    worker closed by its nanny, a killed `twin dataset`), instead of waiting on a
-    pipe nobody writes to."""
-    import threading
-
-    parent = os.getppid()
-
-    def watch():
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()
-
-
-class _InBlenderProcess:
-    """Submits `render_frame` calls to an executor's workers, each of which hands them
-    to its own Blender process."""
-
-    def __init__(self, pool: Executor, tasks_per_worker: int):
-        self.pool, self.tasks_per_worker = pool, tasks_per_worker
-
-    def submit(self, fn, *args):
-        return self.pool.submit(_in_blender_process, fn, args, self.tasks_per_worker)
-
-
-_BLENDER = None  # in a dask worker: its Blender process (a one-process pool), kept between frames
-
-
-def _in_blender_process(fn, args: tuple, tasks_per_worker: int):
-    global _BLENDER
-    if _BLENDER is not None and getattr(_BLENDER, "_broken", False):
-        _BLENDER = None  # its process died (a crash): the next frame starts another
-    if _BLENDER is None:
-        _BLENDER = local_frames(1, tasks_per_worker)
-        import atexit
-
-        atexit.register(_BLENDER.__exit__, None, None, None)
-        _BLENDER = _BLENDER.__enter__()
-    return _BLENDER.submit(fn, *args).result()
-
-
-# --- one frame (a worker) -----------------------------------------------------------------
-
-_WORKER: dict = {}  # the scene a worker keeps between frames of one dataset
-
-
-def render_frame(job: dict, index: int) -> dict:
-    """Render, label and write frame `index`; errors come back as data."""
-    fid = frame_id(index)
-    try:
-        t0 = time.perf_counter()
-        _log_to(job.get("log"))
-        ctx = _context(job)
-        _frame(ctx, Path(job["folder"]), ctx["planner"].plan(index))
-        return {"ok": True, "frame_id": fid, "seconds": time.perf_counter() - t0}
-    except UserError as e:
-        return {"ok": False, "frame_id": fid, "error": str(e)}
-    except Exception as e:  # noqa: BLE001 - the run reports it with the frame it stopped at
-        import traceback
-
-        return {"ok": False, "frame_id": fid, "error": f"{type(e).__name__}: {e}\n{traceback.format_exc()}"}
-
-
-_LOG: list[str] = []  # in a Blender process: the log its file descriptors 1 and 2 go to
-
-
-def _log_to(path: str | None) -> None:
-    """Blender logs on file descriptors 1 and 2 of its process (the terminal's, in a
-    spawned child): a frame's process appends both to the run's log, from its first
-    frame on, before bpy is imported. Never the calling process's own."""
-    import multiprocessing
-
-    if not path or _LOG == [path] or multiprocessing.parent_process() is None:
-        return
-    sys.stdout.flush()
-    sys.stderr.flush()
-    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
-    os.dup2(fd, 1)
-    os.dup2(fd, 2)
-    os.close(fd)
-    _LOG[:] = [path]
-
-
-def _context(job: dict) -> dict:
-    key = json.dumps(job, sort_keys=True)
-    if _WORKER.get("key") == key:
-        return _WORKER
-    if _WORKER.get("scene") is not None:
-        _WORKER["scene"].close()
-    cfg = dataset_config.load(job["config"])
-    site = load_site(Path(job["build"]), Path(job["sources"]))
-    cam = PhoneCamera(width=cfg.sensor.width, height=cfg.sensor.height, samples=cfg.sensor.samples,
-                      render_denoise=cfg.sensor.render_denoise)
-    ctx = open_scene(site, cam, cfg.seed, job["union"])
-    _WORKER.clear()
-    _WORKER.update(ctx, key=key, cfg=cfg, planner=Planner(cfg, site, Path(job["sources"])))
-    return _WORKER
-
-
-def open_scene(site: BuiltSite, cam: PhoneCamera, seed: int, tags: list[str]) -> dict:
-    """A Cycles scene holding `tags` (and the terrain, and the floodlights of the
-    lighting poles among them), every placement labelled with its instance id: what
-    `shoot` renders frames in (a dataset's worker, `twin serve`'s render process)."""
-    from ..render.cycles import CyclesScene
-
-    scene = CyclesScene(site, cam, seed)
-    scene.load_many(tags)
-    scene.load_terrain()
-    # every floodlight of the site, whether or not a frame of this run sees its pole:
-    # a frame's light is then the same whichever frames share its worker
-    scene.add_lamps([p["tag"] for p in site.placements if p["asset"] == "lighting_pole"])
-    ids = labels.instance_ids(site.placements)
-    scene.set_instances(ids)
-    cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
-    category_of = {p["tag"]: cats.get(site.manifests.get(p["asset"], {}).get("category") or p["asset"], 0)
-                   for p in site.placements}
-    return {"site": site, "cam": cam, "scene": scene, "ids": ids, "tag_of": {v: k for k, v in ids.items()},
-            "category_of": category_of}
-
-
-def _frame(ctx: dict, folder: Path, plan: FramePlan) -> None:
-    rgb, ids, depth, record = shoot(ctx, plan)
-    fid = plan.frame_id
-    _write_png(folder / "images" / f"{fid}.png", rgb[..., ::-1])
-    _write_png(folder / "masks" / f"{fid}.png", ids)
-    with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
-        with open(tmp, "wb") as fh:
-            np.save(fh, depth, allow_pickle=False)
-    atomic_write(folder / "records" / f"{fid}.json", json.dumps(record, sort_keys=True, indent=1) + "\n")
-
-
-def shoot(ctx: dict, plan: FramePlan) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """One frame in an `open_scene`: (RGB uint8 (h, w, 3), instance ids uint16, planar
-    depth float32, the frame's record). Only what the plan names changes in the scene
-    (seed, shown placements, switch joints, camera, sun and sky, bound visuals)."""
-    from ..render.frames import develop_shot
-
-    site, scene, cam, shot = ctx["site"], ctx["scene"], ctx["cam"], plan.shot
-    scene.scene.cycles.seed = plan.seed
-    scene.show_only(plan.visible_tags)
-    for tag, position in plan.switches.items():
-        if tag in scene.objects:
-            m = site.manifests[site.placement(tag)["asset"]]
-            scene.set_joints(tag, m, switch_angles(m, position))
-    scene.set_shot(shot)
-    scene.set_sky(plan.aerosol)
-    linear = scene.render()
-    rgb, gain, wb, veil = develop_shot(scene, shot, linear, cam, None, plan.seed)
-    ids, depth = scene.render_labels()
-    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
-    return rgb, ids, depth, _record(ctx, plan, k, ids, depth, gain, wb, veil)
-
-
-def encode_png(pixels: np.ndarray) -> bytes:
-    """PNG bytes through OpenCV (no timestamps; 16-bit when the array is): BGR or one channel."""
-    import cv2
-
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(pixels))
-    if not ok:
-        raise RuntimeError("could not encode a PNG")
-    return buf.tobytes()
-
-
-def _write_png(path: Path, pixels: np.ndarray) -> None:
-    try:
-        data = encode_png(pixels)
-    except RuntimeError:
-        raise RuntimeError(f"could not encode {path}") from None
-    atomic_write(path, data)
-
-
-def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, gain: float,
-            wb: np.ndarray, veil: float) -> dict:
-    site, shot, fid = ctx["site"], plan.shot, plan.frame_id
-    gauges = []
-    for p in site.placements:
-        dial = dial_of(site.pose(p), site.manifests.get(p["asset"], {}))
-        if dial is None or p["tag"] not in plan.oil_levels:
-            continue
-        seen = labels.gauge_visibility(dial, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
-        if seen["visible"]:  # the pointer's rows as posed in this frame: the study's H numerator, true
-            seen["pointer_rows_px"] = ctx["scene"].pointer_rows(p["tag"], shot.cam_pose, k)
-        gauges.append({"tag": p["tag"], "reading": plan.oil_levels[p["tag"]].get(dial.binding["variable"]),
-                       "unit": "%", **seen})
-    kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
-    return {
-        "frame_id": fid, "index": plan.index, "seed": plan.seed,
-        "image": f"images/{fid}.png", "mask": f"masks/{fid}.png", "depth": f"depth/{fid}.npy",
-        "camera": {"name": plan.camera, "K": kmat, "pose": shot.cam_pose.tolist(), "width": k["width"],
-                   "height": k["height"], "zoom": shot.lens.zoom, "hfov_deg": math.degrees(k["hfov"]),
-                   "near": shot.lens.near, "far": shot.lens.far, "target": shot.target,
-                   "convention": "pose: world-from-camera, ENU metres; the camera looks down its -Z, +Y up; "
-                                 "pixel (0, 0) is the top-left corner of the top-left pixel"},
-        "exposure": {"gain": gain, "white_balance": [float(v) for v in wb], "veil": veil},
-        "sun": {"azimuth_deg": math.degrees(shot.sun_azimuth), "elevation_deg": math.degrees(shot.sun_elevation),
-                "irradiance": shot.irradiance, "irradiance_unit": "W/m2, direct on a horizontal surface"},
-        "sky": {"tau_atm": plan.tau_atm, "aerosol_density": plan.aerosol},
-        "local_time": shot.when.isoformat(),
-        "states": {"oil_levels": plan.oil_levels, "switches": plan.switches},
-        "gauges": gauges,
-        "instances": int(len(np.unique(ids[ids > 0]))),
-        "annotations": labels.annotations(ids, ctx["tag_of"], ctx["category_of"]),
-    }
+    return seconds

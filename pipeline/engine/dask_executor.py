@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from ..errors import UserError
-from .worker import THREAD_VARIABLES, Workers, init_worker, run_task
+from .worker import THREAD_VARIABLES, Workers, died, init_worker, run_task
 
 INSTALL_HINT = "dask.distributed is not installed: .venv/bin/pip install -e . (it is a dependency)"
 
@@ -339,11 +339,11 @@ class BuildExecutor(DaskExecutor):
         return super().submit(run_afresh if fn is run_task else fn, *args, **kwargs)
 
 
-def run_afresh(action, args: dict, staging: str, cores: int | None = None) -> dict:
-    """worker.run_task in a staging folder emptied first."""
-
-    shutil.rmtree(staging, ignore_errors=True)
-    Path(staging).mkdir(parents=True)
+def run_afresh(action, args: dict, staging: str | None, cores: int | None = None) -> dict:
+    """worker.run_task in a staging folder emptied first (when it has one)."""
+    if staging is not None:
+        shutil.rmtree(staging, ignore_errors=True)
+        Path(staging).mkdir(parents=True)
     return run_task(action, args, staging, cores)
 
 
@@ -351,7 +351,7 @@ def worker_died(error: Exception) -> dict:
     """A task whose workers all died, as the scheduler reports a local worker's death."""
     tries = getattr(error, "allowed_failures", 0) + 1
     times = f" ({tries} workers in turn)" if tries > 1 else ""
-    return {"ok": False, "error": f"its worker process died{times}", "kind": "worker"}
+    return died(times)
 
 
 def dask_pool(workers: Workers, scheduler: str | None = None, tasks_per_worker: int | None = None) -> Executor:

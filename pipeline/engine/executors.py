@@ -14,11 +14,11 @@ scheduler alone moves outputs into the cache and the build folder.
 
 from __future__ import annotations
 
-from concurrent.futures import Executor, Future
+from concurrent.futures import BrokenExecutor, Executor, Future
 from typing import Callable
 
 from .dask_executor import dask_pool
-from .worker import Workers, init_worker
+from .worker import Workers, died, init_worker
 
 ExecutorFactory = Callable[[Workers], Executor]
 
@@ -65,6 +65,15 @@ class InProcess(Executor):
 
 def in_process(workers: Workers) -> Executor:
     return InProcess()
+
+
+def outcome(future: Future) -> dict:
+    """A run_task call's result from any executor: a local pool's worker that died
+    (the pool broken) reads as dask's does (dask_executor.worker_died)."""
+    try:
+        return future.result()
+    except BrokenExecutor:
+        return died()
 
 
 EXECUTORS: dict[str, ExecutorFactory] = {"local": local_pool, "in-process": in_process, "dask": dask_pool}

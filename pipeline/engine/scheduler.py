@@ -34,7 +34,7 @@ from ..errors import UserError
 from ..files import atomic_write
 from .cache import DEFAULT_LIMIT, Cache, cache_root
 from .executors import ExecutorFactory, local_pool
-from .worker import Workers, default_memory, run_task, warm_up
+from .worker import Workers, default_memory, died, run_task, warm_up
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
 STATE_FILE = ".state.json"
@@ -462,7 +462,7 @@ class Scheduler:
         if len(lost) == 1:
             task = lost[0]
             b.suspects.discard(task.name)
-            self._fail(b, task, {"error": "its worker process died" + _death(workers), "kind": "worker"})
+            self._fail(b, task, died(_death(workers)))
             b.done.add(task.name)
             return
         names = {t.name for t in lost}

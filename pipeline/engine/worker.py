@@ -61,20 +61,22 @@ def memory_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else soft
 
 
-def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict:
-    """One task, wherever it runs. User errors come back as data (with the file and
-    the object they name) so the scheduler reports them; running out of memory is
-    such a failure too; a bug keeps its trace for the report, not the user's screen.
-    `cores`: the task's share of the cores for fork_join.beside and spread, which the
-    scheduler gives when it submits the task (all of the build's to a task that
-    starts with nothing beside it, the scene at the end of a cold build)."""
+def run_task(action, args: dict, staging: str | None, cores: int | None = None) -> dict:
+    """One task, wherever it runs: `action(staging=..., **args)`, or `action(**args)`
+    for a call that writes no staging folder (`staging` None: a dataset's frame). User
+    errors come back as data (with the file and the object they name) so the scheduler
+    reports them; running out of memory is such a failure too; a bug keeps its trace for
+    the report, not the user's screen. `cores`: the task's share of the cores for
+    fork_join.beside and spread, which the scheduler gives when it submits the task (all
+    of the build's to a task that starts with nothing beside it, the scene at the end of
+    a cold build)."""
     before = os.environ.get(SHARE_VARIABLE)
     if cores is not None:
         os.environ[SHARE_VARIABLE] = str(cores)
         _hold_to(cores)
     try:
         t0 = time.perf_counter()
-        result = action(staging=Path(staging), **args) or {}
+        result = (action(**args) if staging is None else action(staging=Path(staging), **args)) or {}
         return {"ok": True, "result": result, "seconds": time.perf_counter() - t0}
     except UserError as e:
         return {"ok": False, "user_error": str(e), "file": e.file, "object": e.obj, "message": e.message}
@@ -97,6 +99,12 @@ def run_task(action, args: dict, staging: str, cores: int | None = None) -> dict
             # registered, so it runs first
             atexit.unregister(_exit_now)
             atexit.register(_exit_now)
+
+
+def died(how: str = "") -> dict:
+    """A task whose worker process died under it, as run_task's failures read; `how`:
+    what is known of the death (an exit code)."""
+    return {"ok": False, "error": f"its worker process died{how}", "kind": "worker"}
 
 
 def warm_up(modules: tuple[str, ...]) -> None:

@@ -29,8 +29,10 @@ import numpy as np
 
 from ..errors import UserError
 from ..files import atomic_write
+from ..geometry.pinhole import project
 from .gauge import Dial, dial_of
-from .gauge_reader import DARK_OF_FACE, DARK_V, MIN_DIAL_PX, READERS, SCORED, STATUS_READ, UNREADABLE, score_gauge
+from .gauge_reader import (DARK_OF_FACE, DARK_V, MIN_DIAL_PX, POINTER_OUTLINE, READERS, SCORED, STATUS_READ,
+                           UNREADABLE, score_gauge)
 
 # --- a dataset ------------------------------------------------------------------------------------
 
@@ -86,10 +88,31 @@ def score_dataset(folder: Path, site, frames: list[dict], progress=None) -> list
                    "local_hours": local_hours(f["local_time"]), "sun_elevation_deg": f["sun"]["elevation_deg"],
                    "sun_azimuth_deg": f["sun"]["azimuth_deg"], "irradiance": f["sun"]["irradiance"],
                    "true": g["reading"]}
-            rows.append({**row, **score_gauge(bgr, dial, cam_pose, k, g["reading"])})
+            scored = score_gauge(bgr, dial, cam_pose, k, g["reading"])
+            for name in READERS:
+                if isinstance(scored.get(name), dict):
+                    scored[name]["angle_error_deg"] = keypoint_angle_error(
+                        dial, scored[name].get("angle_rad"), g.get("keypoints"), cam_pose, k)
+            rows.append({**row, **scored})
     if progress:
         progress(len(frames), len(frames))
     return rows
+
+
+def keypoint_angle_error(dial: Dial, angle: float | None, keypoints: list | None, cam_pose: np.ndarray,
+                         k: dict) -> float | None:
+    """The reader's pointer direction against the frame's keypoints, in the picture
+    (deg, signed, -180..180): the angle at the dial-centre keypoint between the
+    pointer-tip keypoint and the tip the reader's angle puts there, projected. None
+    without a reading, keypoints (a dataset made before them) or both points in frame."""
+    if angle is None or not keypoints or keypoints[2] == 0 or keypoints[5] == 0:
+        return None
+    centre, tip = np.array(keypoints[0:2], float), np.array(keypoints[3:5], float)
+    read = project((dial.centre + float(POINTER_OUTLINE[:, 1].max()) * dial.direction(angle))[None, :], cam_pose, k)[0]
+    if np.isnan(read).any():
+        return None
+    a, b = tip - centre, read - centre
+    return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
 
 
 def run_baseline(folder, out=None, *, sources: Path, progress=None) -> Path:
@@ -127,10 +150,12 @@ def _mean(values) -> float | None:
 
 def reader_summary(scored: list[dict], reader: str) -> dict:
     """One reader over scored rows: how many it read, the share, the mean and largest
-    absolute reading error of those read, and why it read none of the others."""
+    absolute reading error of those read, their mean absolute pointer-angle error
+    against the keypoints (deg, in the picture), and why it read none of the others."""
     read = [r[reader] for r in scored if r[reader]["status"] == STATUS_READ]
     return {"read": len(read), "share_read": len(read) / len(scored) if scored else None,
             "mae": _mean(abs(r["error"]) for r in read),
+            "angle_mae_deg": _mean(abs(r["angle_error_deg"]) for r in read if r.get("angle_error_deg") is not None),
             "max_abs_error": max((abs(r["error"]) for r in read), default=None),
             "unreadable": {why: sum(r[reader]["status"] == why for r in scored) for why in UNREADABLE}}
 
@@ -269,7 +294,7 @@ def _f(x, spec: str = ".1f") -> str:
 
 def _reader_cells(b: dict) -> str:
     return "".join(f"<td>{x['read']}</td><td>{_f(x['share_read'], '.0%')}</td><td>{_f(x['mae'])}</td>"
-                   f"<td>{_f(x['max_abs_error'])}</td>"
+                   f"<td>{_f(x['max_abs_error'])}</td><td>{_f(x.get('angle_mae_deg'))}</td>"
                    f"<td>{' / '.join(str(x['unreadable'][w]) for w in UNREADABLE)}</td>"
                    for x in (b["readers"][n] for n in READERS))
 
@@ -288,12 +313,13 @@ def _gallery(report: dict, caption) -> str:
 
 def _html(report: dict, images: Path) -> str:
     e = html.escape
-    per_reader = "".join(f"<th colspan=\"5\">reader: {e(n)}</th>" for n in READERS)
+    per_reader = "".join(f"<th colspan=\"6\">reader: {e(n)}</th>" for n in READERS)
     head = ("<tr><th rowspan=\"2\">condition</th><th rowspan=\"2\">gauges seen</th><th rowspan=\"2\">too small</th>"
             "<th rowspan=\"2\">cut by the frame</th><th rowspan=\"2\">scored</th>" + per_reader +
             "<th rowspan=\"2\">mean H</th><th rowspan=\"2\">mean |H - 1|</th></tr><tr>" +
-            "<th>read</th><th>share read</th><th>MAE (% level)</th><th>max |error|</th>"
-            "<th>unreadable: no pointer / dark face / no line</th>" * len(READERS) + "</tr>")
+            ("<th>read</th><th>share read</th><th>MAE (% level)</th><th>max |error|</th>"
+             "<th>angle MAE against the keypoints (deg)</th>"
+             "<th>unreadable: no pointer / dark face / no line</th>") * len(READERS) + "</tr>")
     body = "".join(
         f"<tr><td>{e(b['bin'])}</td><td>{b['seen']}</td><td>{b['too_small']}</td><td>{b['cut']}</td>"
         f"<td>{b['scored']}</td>{_reader_cells(b)}<td>{_f(b['mean_H'], '.2f')}</td><td>{_f(b['mae_H'], '.2f')}</td></tr>"

@@ -341,11 +341,24 @@ class CyclesScene:
     def set_sky(self, aerosol: float) -> None:
         self.sky.aerosol_density = float(aerosol)
 
-    def render_labels(self) -> tuple[np.ndarray, np.ndarray]:
-        """(instance ids uint16, planar depth float32 in metres, inf where no surface) of
-        the current frame, from Cycles itself: every surface replaced by an emission of
-        (object index, view Z depth), one sample through each pixel's centre, so the
-        ids are whole numbers and never blend across an edge."""
+    def set_parts(self, parts: dict[str, dict[str, int]]) -> None:
+        """Each object's part id (tag -> object name -> id, 0 for none), which the label
+        pass renders beside the instance ids."""
+        for tag, objs in self.objects.items():
+            for name, ob in objs.items():
+                ob["twin_part"] = float(parts.get(tag, {}).get(name, 0))
+
+    def render_labels(self, as_lights: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(instance ids uint16, planar depth float32 in metres, inf where no surface,
+        part ids uint16 (set_parts)) of the current frame, from Cycles itself: every
+        surface replaced by an emission of (object index, view Z depth, part id), one
+        sample through each pixel's centre, so the ids are whole numbers and never blend
+        across an edge.
+
+        The emission is seen by camera rays only (nothing else shades), so Cycles is told
+        not to sample it as light: otherwise it builds a light tree over every triangle
+        of the frame, half of the pass's time, for the same bytes. `as_lights`: the
+        pass as it was before (the bench's "before")."""
         bpy, s = self.bpy, self.scene
         layer = bpy.context.view_layer
         saved = (s.cycles.samples, s.cycles.use_denoising, s.cycles.filter_width, s.world, layer.material_override)
@@ -353,6 +366,7 @@ class CyclesScene:
             s.cycles.samples, s.cycles.use_denoising, s.cycles.filter_width = 1, False, 0.01
             s.world = self._label_world()
             layer.material_override = self._label_material()
+            layer.material_override.cycles.emission_sampling = "AUTO" if as_lights else "NONE"
             px = self.render()
         finally:
             (s.cycles.samples, s.cycles.use_denoising, s.cycles.filter_width, s.world,
@@ -360,7 +374,7 @@ class CyclesScene:
         ids = np.rint(px[..., 0]).astype(np.uint16)
         depth = px[..., 1].astype(np.float32)
         depth[depth <= 0.0] = np.inf  # the background emits nothing; every surface lies beyond the near plane
-        return ids, depth
+        return ids, depth, np.rint(px[..., 2]).astype(np.uint16)
 
     def _label_material(self):
         bpy = self.bpy
@@ -377,6 +391,9 @@ class CyclesScene:
         out = nt.nodes.new("ShaderNodeOutputMaterial")
         nt.links.new(info.outputs["Object Index"], rgb.inputs[0])
         nt.links.new(cam.outputs["View Z Depth"], rgb.inputs[1])
+        part = nt.nodes.new("ShaderNodeAttribute")
+        part.attribute_type, part.attribute_name = "OBJECT", "twin_part"
+        nt.links.new(part.outputs["Factor"], rgb.inputs[2])
         nt.links.new(rgb.outputs[0], emit.inputs["Color"])
         emit.inputs["Strength"].default_value = 1.0
         nt.links.new(emit.outputs[0], out.inputs["Surface"])

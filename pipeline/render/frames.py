@@ -123,6 +123,15 @@ def develop_shot(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCame
     """The phone's picture of one linear render: (RGB uint8, gain, white balance, veil).
     `lock` = (gain, white balance) of a locked exposure, or None to meter this frame;
     `seed` draws the frame's sensor noise."""
+    gain, wb, veil = shot_exposure(bl, shot, linear, cam, lock)
+    rgb = develop(linear, gain, veil, wb, cam, seed=seed)
+    return rgb, gain, wb, float(veil.mean())
+
+
+def shot_exposure(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCamera,
+                  lock) -> tuple[float, np.ndarray, np.ndarray]:
+    """(gain, white balance, the lens's veil (h, w, 3)) of one linear render, as
+    develop_shot develops it."""
     if lock is None:
         gain, wb = metered_gain(linear, cam), metered_white_balance(linear, cam)
     else:
@@ -130,8 +139,7 @@ def develop_shot(bl: CyclesScene, shot: Shot, linear: np.ndarray, cam: PhoneCame
     k = intrinsics(shot.lens.hfov, linear.shape[1], linear.shape[0])
     visible = shot.sun_elevation > 0 and bl.sun_visible(shot.cam_pose[:3, 3], shot.sun_dir)
     veil = lens_glare(linear, gain, wb, shot.cam_pose, k, shot.sun_dir, shot.dni if visible else 0.0, cam)
-    rgb = develop(linear, gain, veil, wb, cam, seed=seed)
-    return rgb, gain, wb, float(veil.mean())
+    return gain, wb, veil
 
 
 def _one(bl: CyclesScene, site: BuiltSite, shot: Shot, folder: Path, name: str, cam: PhoneCamera, lock) -> dict:

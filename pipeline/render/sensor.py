@@ -270,6 +270,19 @@ def sensor_noise(exposure: np.ndarray, gain: float, cam: PhoneCamera, seed: int)
     return electrons / full_scale
 
 
+def clipped(linear_rgb: np.ndarray, gain: float, veil=0.0, wb=None) -> np.ndarray:
+    """(h, w) bool: the pixels the sensor clips, from the radiance develop() exposes
+    (the render plus the lens's veil, white-balanced, times the gain) reaching full
+    scale in any channel, before noise: the glare's own extent, not a threshold on the
+    8-bit picture (whose noise reduction and sRGB curve move it)."""
+    wb = np.ones(3) if wb is None else np.asarray(wb, float)
+    veil = np.asarray(veil, np.float64)
+    if veil.ndim == 2:
+        veil = veil[..., None]
+    exposure = gain * (np.asarray(linear_rgb, np.float64) + veil) * wb
+    return (exposure >= 1.0).any(axis=-1)
+
+
 def develop(linear_rgb: np.ndarray, gain: float, veil=0.0, wb=None, cam: PhoneCamera | None = None, *,
             seed: int | None = None) -> np.ndarray:
     """(h, w, 3) linear radiance -> (h, w, 3) uint8 sRGB (RGB order): `veil` (W/m2/sr, a

@@ -155,3 +155,47 @@ def test_scale_rows_put_the_sample_and_the_large_plan_side_by_side():
     assert got["5,000 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (4.0, 1.0)
     assert got["787 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (0.5, 1.0)
     assert "10 visuals, 4 collisions" in next(t for t in got if t.startswith("5,000") and "parse under 10 s" in t)
+
+
+def test_the_dataset_section_compares_the_label_pass_before_and_after(tmp_path, monkeypatch):
+    """The section's arithmetic on runs that write what run_dataset writes (no render):
+    the labels_before run against local_1, per frame and per label pass, and the rows."""
+    import json as _json
+
+    from pipeline.bench import dataset as section
+    from pipeline.bench.context import Context
+    from pipeline.bench.summary import _dataset_rows
+    from pipeline.datasets import run as dataset_run
+
+    calls = []
+
+    def fake_run(config, out, *, executor, workers, tasks_per_worker, sources, labels_as_lights=False):
+        calls.append(labels_as_lights)
+        folder = out / "datasets" / "x"
+        folder.mkdir(parents=True)
+        (folder / "a.png").write_bytes(b"same")
+        labels = 8.0 if labels_as_lights else 4.0
+        (folder / "timings.json").write_text(_json.dumps({
+            "frame_s": [20.0, 10.0 + labels, 10.0 + labels], "render_s": [10.0, 10.0, 10.0],
+            "labels_s": [labels] * 3, "plan_s": 0.1, "scene_placements": 3}))
+        return folder
+
+    monkeypatch.setattr(dataset_run, "run_dataset", fake_run)
+    built = tmp_path / "built"
+    (built / "scene").mkdir(parents=True)
+    (built / "models").mkdir()
+    (built / "scene" / "placements.json").write_text("[]")
+    sources = tmp_path / "sources"
+    (sources / "datasets").mkdir(parents=True)
+    (sources / "datasets" / "inspection_route.toml").write_text("count = 100\nwidth = 640\nheight = 480\n")
+    work = tmp_path / "work"
+    work.mkdir()
+    ctx = Context(sources=sources, out=built, work=work, quick=True, shared={"built": built})
+    d = section.dataset_section(ctx)
+    assert calls.count(True) == 1 and len(calls) == len(section.RUNS)
+    labels = d["labels"]
+    assert labels["identical"] and labels["labels_after_to_before"] == 0.5
+    assert labels["frame_after_to_before"] == pytest.approx(14.0 / 18.0)
+    assert labels["label_share_before"] == pytest.approx(8.0 / 18.0)
+    rows = {r["metric"]: r for r in _dataset_rows(d)}
+    assert rows["s per label pass"]["ratio"] == 0.5 and "identical files" in rows["s per label pass"]["note"]

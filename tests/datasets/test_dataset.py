@@ -46,6 +46,20 @@ mast = "CAM-1"
 presets = [{ target = "RE-A1", zoom = 8.0 }]
 """
 
+# equipment that looks used (issue 38 item 5): every key of [appearance]
+LOOK = """
+[appearance]
+colour_jitter = [0.1, 0.2]
+roughness_jitter = 0.1
+dirt = [0.0, 0.8]
+rust = [0.0, 0.5]
+oil_stains = [0.0, 0.3]
+weathering = [0.2, 0.6]
+sky = { clear = 2, overcast = 1, hazy = 1 }
+exposure_ev = [-1.0, 1.0]
+vignetting = [0.0, 0.3]
+"""
+
 OUTPUTS = ("coco.json", "frames.jsonl", "dataset.json")
 
 
@@ -186,10 +200,36 @@ def test_labels_are_exact_and_coco_loads(tiny_run):
         assert k[0, 2] == 48.0 and k[1, 2] == 36.0 and len(frame["camera"]["pose"]) == 4
         assert {g["tag"] for g in frame["gauges"]} >= {"RE-A1", "RE-A2"}
         assert all(0.0 <= g["reading"] <= 100.0 for g in frame["gauges"])
+        parts = cv2.imread(str(folder / frame["parts"]), cv2.IMREAD_UNCHANGED)
+        assert parts.dtype == np.uint16 and parts.shape == masks.shape
+        # the glare mask beside the instance mask: 0/1, as many ones as the record says
+        glare = cv2.imread(str(folder / frame["glare"]["mask"]), cv2.IMREAD_UNCHANGED)
+        assert glare.dtype == np.uint8 and glare.shape == masks.shape and set(np.unique(glare)) <= {0, 1}
+        assert int(glare.sum()) == frame["glare"]["clipped_px"]
+        for g in frame["gauges"]:
+            assert -360.0 <= g["pointer_angle_deg"] <= 360.0
+            assert len(g["keypoints"]) == 3 * len(frame["gauge_keypoints"])
+            if g["visible"]:
+                assert g["keypoints"][2] == 2  # the dial's centre is seen where the gauge is
+                assert g["pointer_px"] >= 1 and isinstance(g["glare_hides_pointer"], bool)
+                assert 0.0 <= g["pointer_clipped_share"] <= 1.0
         # the camera aims at its target's dial: the target is in the frame, and its
         # gauge is visible whenever the dial's centre pixel is the dial at its depth
         target = frame["camera"]["target"]
         assert any(a["tag"] == target for a in anns)
+    # every part annotation decodes to its part of its instance, and every such pair has one
+    part_coco = json.loads((folder / "coco_parts.json").read_text())
+    assert {c["name"] for c in part_coco["categories"]} >= {"gauge_pointer", "gauge_glass", "bushing"}
+    for image, frame in zip(part_coco["images"], frames):
+        masks = cv2.imread(str(folder / frame["mask"]), cv2.IMREAD_UNCHANGED)
+        parts = cv2.imread(str(folder / frame["parts"]), cv2.IMREAD_UNCHANGED)
+        anns = [a for a in part_coco["annotations"] if a["image_id"] == image["id"]]
+        pairs = {(int(i), int(p)) for i, p in zip(masks.ravel(), parts.ravel()) if i and p}
+        assert {(a["instance_id"], a["category_id"]) for a in anns} == pairs
+        for a in anns:
+            pixels = (masks == a["instance_id"]) & (parts == a["category_id"])
+            assert np.array_equal(rle.decode(a["segmentation"]).astype(bool), pixels)
+    assert any(a["category_id"] for a in part_coco["annotations"])  # the tiny frames see gauge parts
 
 
 @pytest.mark.slow
@@ -285,3 +325,106 @@ def test_a_run_shows_a_bar_keeps_blenders_log_in_a_file_and_leaves_no_temp_files
     assert "frames" in proc.stderr and "1/1" in proc.stderr  # the bar, done
     assert str(log) in proc.stderr
     assert sorted(p.name for p in temp.rglob("*")) == []
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def dask_cli_cluster(tmp_path):
+    """A scheduler and a worker (under its nanny, two task threads) started with dask's
+    own CLI and no configuration of ours, as a user starts them."""
+    pytest.importorskip("distributed")
+    dask = Path(sys.executable).parent / "dask"
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    logs = [open(tmp_path / "scheduler.log", "w"), open(tmp_path / "worker.log", "w")]
+    procs = [subprocess.Popen([str(dask), "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                              cwd=tmp_path, env=env, stdout=logs[0], stderr=subprocess.STDOUT, start_new_session=True)]
+    procs.append(subprocess.Popen([str(dask), "worker", address, "--host", "127.0.0.1", "--nworkers", "1",
+                                   "--nthreads", "2", "--no-dashboard"],
+                                  cwd=tmp_path, env=env, stdout=logs[1], stderr=subprocess.STDOUT,
+                                  start_new_session=True))
+    try:
+        from distributed import Client
+
+        with Client(address, timeout="60s") as client:
+            client.wait_for_workers(1, timeout=120)
+        yield address
+    finally:
+        for p in reversed(procs):
+            os.killpg(p.pid, signal.SIGTERM)
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
+        for log in logs:
+            log.close()
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_a_dataset_runs_on_a_cluster_started_with_dasks_cli(tiny_run, sample_build, tmp_path, dask_cli_cluster):
+    """`dask worker` runs its tasks in a daemonic process under its nanny, which may not
+    have multiprocessing children: each frame's Blender is a subprocess of its own."""
+    config, reference = tiny_run
+    out = _scene_copy(sample_build, tmp_path / "cli")
+    proc = twin("dataset", config, "--out", out, "--executor", "dask", "--scheduler", dask_cli_cluster)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    expected, got = _files(reference), _files(out / "datasets" / "tiny")
+    assert got.keys() == expected.keys()
+    assert [k for k in expected if got[k] != expected[k]] == []
+
+
+# sha256 of the tiny config's labels as the separate label pass made them before issue 38
+# item 4 (main at 725b178 and again at 7f6c6ad, bpy 5.0.1): the pass now costs half as much,
+# for the same bytes
+LABELS_BEFORE = {
+    "masks/000000.png": "4a1b57c488fe7edf7c200172d7ccfbd9de4fd378974d34aa88e96ac1084a4b69",
+    "masks/000001.png": "11d78e134de83122e08fac459ef12dd538e91c5a75d419d0f3a49035f9cad26c",
+    "masks/000002.png": "11d78e134de83122e08fac459ef12dd538e91c5a75d419d0f3a49035f9cad26c",
+    "masks/000003.png": "11d78e134de83122e08fac459ef12dd538e91c5a75d419d0f3a49035f9cad26c",
+    "depth/000000.npy": "fdd3ff1e5664d465bafa128d6772247fe29b43ba04ee3052dc26956c1e87eb54",
+    "depth/000001.npy": "56f63b2d8399aa3216b940c3d0c50bf712016c1f689a1530a1c9591462b2c6c3",
+    "depth/000002.npy": "56f63b2d8399aa3216b940c3d0c50bf712016c1f689a1530a1c9591462b2c6c3",
+    "depth/000003.npy": "56f63b2d8399aa3216b940c3d0c50bf712016c1f689a1530a1c9591462b2c6c3",
+    "coco.json": "34df99f44ff8890dcbd2feb4fac776a99292a084b93beb1d9a3dc8d1742ad7dd",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_the_labels_are_the_bytes_they_were_before_the_faster_label_pass(tiny_run):
+    import hashlib
+
+    _, folder = tiny_run
+    got = {rel: hashlib.sha256((folder / rel).read_bytes()).hexdigest() for rel in LABELS_BEFORE}
+    assert got == LABELS_BEFORE
+    timings = json.loads((folder / "timings.json").read_text())
+    assert len(timings["labels_s"]) == len(timings["render_s"]) == 4
+    assert all(0 < s for s in timings["labels_s"] + timings["render_s"])
+
+
+@pytest.mark.slow
+@pytest.mark.blender
+def test_an_appearance_changes_the_picture_and_not_the_labels(tiny_run, sample_build, tmp_path):
+    """Dirt, rust, tints, another sky and exposure on frame 0: the same masks and depth
+    (nothing moved), another picture, and the draw in its record."""
+    _, reference = tiny_run
+    out = _scene_copy(sample_build, tmp_path / "look")
+    proc = twin("dataset", _config(tmp_path, TINY + LOOK), "--out", out, "--frames", "1")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    folder = out / "datasets" / "tiny"
+    for rel in ("masks/000000.png", "depth/000000.npy"):
+        assert (folder / rel).read_bytes() == (reference / rel).read_bytes(), rel
+    assert (folder / "images/000000.png").read_bytes() != (reference / "images/000000.png").read_bytes()
+    record = json.loads((folder / "records/000000.json").read_text())
+    assert sorted(record["appearance"]["instances"]) and record["appearance"]["sky"] in ("clear", "overcast", "hazy")

@@ -265,3 +265,30 @@ def test_the_build_factory_takes_a_scheduler_address(src, tmp_path):
         assert not r.failed and (out / "joined.txt").read_text() == "ALPHA+BETA"
         assert len(cluster.scheduler.workers) == 1
         assert "twin-setup" not in cluster.scheduler.worker_plugins  # taken back with the client
+
+
+def _kill_own_process(staging=None) -> None:
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def _echo(value: int) -> dict:
+    return {"value": value}
+
+
+def test_calls_without_staging_and_a_dead_worker_read_the_same_on_every_executor():
+    """run_task with no staging folder (a dataset's frame) on the local pool and on
+    dask: the result comes back as data, and a worker that dies under its call reads
+    as the scheduler reports one (engine.executors.outcome)."""
+    from pipeline.engine.executors import local_pool, outcome
+    from pipeline.engine.worker import Workers, run_task
+
+    workers = Workers(count=1, threads=1)
+    for factory in (local_pool, dask_pool):
+        pool = factory(workers)
+        try:
+            ok = outcome(pool.submit(run_task, _echo, {"value": 7}, None))
+            assert ok["ok"] and ok["result"] == {"value": 7}, factory
+            dead = outcome(pool.submit(run_task, _kill_own_process, {}, None))
+            assert dead == {"ok": False, "error": "its worker process died", "kind": "worker"}, factory
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)

@@ -246,3 +246,27 @@ def test_the_baseline_reads_a_rendered_dataset(close_dataset, tmp_path):
     assert report["bins"][-1]["readers"]["relative"]["read"] == len(read)
     for png in report["plots"].values():
         assert (tmp_path / "reports" / png).is_file()
+
+
+def test_the_readers_angle_is_scored_against_the_keypoints_in_the_picture():
+    """A dataset's keypoints (datasets.labels.gauge_keypoints) against a reader's angle:
+    0 when they agree, the turn between them otherwise, signed; None without keypoints."""
+    from pipeline.datasets import labels
+    from pipeline.perception import baseline as pb
+    from pipeline.geometry.pinhole import intrinsics
+
+    axis, up = np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0])
+    dial = bl.Dial(np.zeros(3), axis, up, np.cross(axis, up), {"variable": "level", "range": [-2.0, 2.0]})
+    pose = np.eye(4)
+    pose[2, 3] = 0.6
+    k = intrinsics(np.radians(40.0), 64, 48)
+    ids, depth = np.full((48, 64), 3, np.uint16), np.full((48, 64), 0.6, np.float32)
+    kp = labels.gauge_keypoints(dial, 0.3, pose, k, ids, depth, 3)
+    assert pb.keypoint_angle_error(dial, 0.3, kp, pose, k) == pytest.approx(0.0, abs=1e-9)
+    # facing the camera, the picture shows the dial's turn as it is (the sign: the image's v runs down)
+    assert abs(pb.keypoint_angle_error(dial, 0.3 + math.radians(10.0), kp, pose, k)) == pytest.approx(10.0, abs=1e-6)
+    assert pb.keypoint_angle_error(dial, None, kp, pose, k) is None
+    assert pb.keypoint_angle_error(dial, 0.3, None, pose, k) is None
+    scored = [{"status": bl.SCORED, **{n: {"status": "read", "error": 1.0, "angle_error_deg": e} for n in bl.READERS}}
+              for e in (2.0, -4.0, None)]
+    assert pb.reader_summary(scored, "study")["angle_mae_deg"] == pytest.approx(3.0)

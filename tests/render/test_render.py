@@ -271,3 +271,30 @@ def test_frame_error_is_the_rms_level_difference_after_the_references_exposure()
     levels = lambda x: np.round(sensor.srgb_encode(np.float64(gain * x)) * 255.0)  # noqa: E731
     expected = abs(levels(0.05) - levels(0.025))
     assert bench_render.frame_error(ref * 0.5, ref, cam) == pytest.approx(expected) and expected > 30
+
+
+def test_the_clipped_mask_is_the_exposed_radiance_at_full_scale_before_noise():
+    from pipeline.render.sensor import PhoneCamera, clipped, develop
+
+    linear = np.full((4, 6, 3), 0.2)
+    linear[1, 2] = [0.2, 0.2, 1.5]  # one channel over full scale at gain 1
+    linear[3, 5] = 0.99
+    veil = np.zeros((4, 6))
+    veil[3, 5] = 0.02  # the lens's veil pushes this one over
+    mask = clipped(linear, 1.0, veil)
+    assert mask.dtype == bool and mask.shape == (4, 6)
+    assert sorted(zip(*np.nonzero(mask))) == [(1, 2), (3, 5)]
+    assert not clipped(linear, 0.5, veil).any()  # a shorter exposure clips nothing
+    assert clipped(linear, 1.0, veil, wb=np.array([1.0, 1.0, 0.5]))[1, 2] == False  # noqa: E712 - the blue gain
+    # the 8-bit picture of the same frame saturates there too (noise aside)
+    rgb = develop(linear, 1.0, veil, None, PhoneCamera(denoise=0))
+    assert (rgb[mask] == 255).any(axis=-1).all()
+
+
+def test_vignetting_darkens_the_corners_and_leaves_the_centre():
+    from pipeline.render.appearance import vignette
+
+    flat = np.ones((48, 64, 3), np.float32)
+    out = vignette(flat, 0.3)
+    assert out.dtype == np.float32 and out[24, 32, 0] > 0.999 and abs(out[0, 0, 0] - 0.7) < 0.02
+    assert vignette(flat, 0.0) is flat
