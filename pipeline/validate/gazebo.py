@@ -144,7 +144,9 @@ def written_summary(path: Path) -> MeshSummary:
                 if name == "POSITION":
                     positions.append(data[:, :3] * scale)
                 elif name == "NORMAL":
-                    normals.append(data[:, :3])
+                    # gz-common normalizes each normal as it loads (ColladaLoader::LoadNormals)
+                    length = np.linalg.norm(data[:, :3], axis=1, keepdims=True)
+                    normals.append(np.divide(data[:, :3], length, out=np.zeros_like(data[:, :3]), where=length > 0))
                 elif name == "TEXCOORD":
                     uvs.append(data[:, :2])
     corners = np.concatenate(positions) if positions else np.zeros((0, 3))
