@@ -335,7 +335,7 @@ def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path
     scene, world_counts, figures = [], {}, {}
     if world is not None:
         seen = probe_world(world, [models], meshes=False, physics_s=physics_s)
-        figures = {"world": {k: seen["world"][k] for k in ("parse_s", "peak_rss_mb")},
+        figures = {"world": {k: seen["world"][k] for k in ("parse_s", "parse_cpu_s", "peak_rss_mb") if k in seen["world"]},
                    "physics": seen.get("physics", {})}
         world_counts = {k: seen["world"][k] for k in ("models", "links", "visuals", "collisions")}
         scene += world_findings(world.name, seen["world"])
