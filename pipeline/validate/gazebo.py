@@ -343,8 +343,20 @@ def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path
             for use in model["meshes"]:
                 if not use["path"]:
                     scene.append(finding("GZ009", f"{world.name}/{model['name']}", f"{use['uri']} does not resolve"))
+        scene += _scene_mesh_findings(world, seen)
         scene += physics_findings(world.name, seen.get("physics", {}))
     return BuildCheck(found, scene, world_counts, figures)
+
+
+def _scene_mesh_findings(world: Path, seen: dict) -> list[Finding]:
+    """The meshes the world names beside itself (its collision cells), as Gazebo's
+    loader reads them against what the files hold; the packages' meshes are checked
+    with their packages."""
+    folder = world.parent.resolve()
+    paths = sorted({Path(use["path"]).resolve() for model in seen.get("models", []) for use in model["meshes"]
+                    if use["path"] and Path(use["path"]).resolve().is_relative_to(folder)})
+    reports = {str(Path(k).resolve()): v for k, v in probe_meshes(paths).items()}
+    return mesh_findings(paths, reports, lambda path: f"{world.name}/{path.relative_to(folder)}")
 
 
 def _variant_level(name: str) -> int:

@@ -279,6 +279,22 @@ def test_grouped_placements_collide_in_the_cells_where_they_stand(site):
     assert collides_where_placed(root, seen, out, placements) == len(placements)
 
 
+def test_validation_reads_the_collision_cells_as_gazebo_does(site, tmp_path):
+    """check_build loads the meshes the world names beside itself and compares them
+    with the files: none on the built world, a finding naming the cell when one is
+    cut short."""
+    out, world, _ = site
+    shutil.copytree(out / "scene", tmp_path / "scene")
+    copy = tmp_path / "scene" / world.name
+    clean = gazebo.check_build(out / "models", copy, {}, tmp_path, physics_s=0.0)
+    assert clean.scene == []
+    cell = sorted((tmp_path / "scene" / "collision").glob("*.dae"))[0]
+    cell.write_bytes(cell.read_bytes()[: len(cell.read_bytes()) // 2])
+    found = gazebo.check_build(out / "models", copy, {}, tmp_path, physics_s=0.0).scene
+    assert found and {f.site for f in found} == {f"{world.name}/collision/{cell.name}"}
+    assert {f.code for f in found} <= {"GZ001", "GZ010"}
+
+
 def test_dartsim_builds_and_steps_the_world(site):
     _, _, seen = site
     physics = seen["physics"]
