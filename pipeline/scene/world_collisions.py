@@ -13,7 +13,7 @@ which gz-sim resolves against the world file) and drawn by one model of one link
 What each placement adds, in the same place as its own collision would be (its
 frame's pose, its scale): near ones (LOD 0, the few around the inspection points
 where a robot works) every triangle of their package's collision meshes
-(names.WHOLE_COLLISION_FILE); the others the oriented box of each part of them (a
+(names.WHOLE_COLLISION_FILE); the others the box of each part of them (a
 vertex-connected piece: a post, a tank, a fence panel), the footprint and height a
 robot or a drone keeps clear of, at 12 triangles a part whatever the part's own
 count. Placements that repeat one another exactly (devices piled on one insertion
@@ -106,25 +106,39 @@ class CollisionCells:
 
 def _collision_parts(path: Path, exact: bool) -> tuple[np.ndarray, np.ndarray] | None:
     """(vertices (n, 3) float64, faces (m, 3) int64) in the model frame of a package's
-    whole collision mesh: every triangle (exact) or each part's oriented box. None
+    whole collision mesh: every triangle (exact) or each part's box (part_box). None
     when the file is not there."""
     if not path.is_file():
         return None
     vertices, faces = read_collada_triangles(path)
     if exact or len(faces) == 0:
         return vertices, faces
-    import trimesh
-
     from ..geometry.collision import connected_parts
 
-    boxes = []
-    for idx in connected_parts(faces, len(vertices)):
-        to_origin, extents = trimesh.bounds.oriented_bounds(vertices[idx])
-        box = trimesh.creation.box(extents=np.maximum(extents, 1e-3), transform=np.linalg.inv(to_origin))
-        boxes.append((np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)))
+    boxes = [part_box(vertices[idx]) for idx in connected_parts(faces, len(vertices))]
     offsets = np.cumsum([0] + [len(v) for v, _ in boxes[:-1]])
     return (np.concatenate([v for v, _ in boxes]),
             np.concatenate([f + k for (_, f), k in zip(boxes, offsets)]))
+
+
+def part_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The smaller of two boxes around `points: (n, 3)`: along the model's axes (a
+    post, a tank, a panel) or along the points' principal axes (a diagonal brace).
+    Returns vertices (8, 3) and outward faces (12, 3); each side at least 1 mm."""
+    from ..geometry.collision import box_hull
+
+    pts = np.asarray(points, dtype=np.float64)
+    centre = pts.mean(axis=0)
+    _, axes = np.linalg.eigh(np.cov((pts - centre).T) if len(pts) > 1 else np.eye(3))
+    if np.linalg.det(axes) < 0:
+        axes[:, 0] = -axes[:, 0]  # a rotation, so the faces stay outward
+    best = None
+    for frame in (np.eye(3), axes):
+        v, f = box_hull((pts - centre) @ frame, pad=1e-3)
+        volume = float(np.prod(v.max(axis=0) - v.min(axis=0)))
+        if best is None or volume < best[0]:
+            best = (volume, v @ frame.T + centre, f)
+    return best[1], best[2]
 
 
 def read_collada_triangles(path: Path) -> tuple[np.ndarray, np.ndarray]:
