@@ -1,7 +1,10 @@
 """Author sources/assets/disconnect_switch_cb: a centre-break disconnector, one pole.
 
 A steel support (legs and beam, with authored collision boxes) carries two rotating
-post-insulator columns 4.6 m apart. Each column turns on a revolute joint about Z and
+post-insulator columns 4.6 m apart. The beam tops out at 4 m: the sample strings this
+pole at 500 kV, whose live parts stand 5.4 m clear of the ground (IEC 61936-1's H,
+sources/clearances.toml), the blades' terminals at 6.8 m with the hot conductors' sag
+below them. Each column turns on a revolute joint about Z and
 carries half of the blade; the halves meet in the middle when closed. Blade half 2 is
 blade half 1 mirrored with a negative X scale, as a modeller would build it.
 
@@ -15,7 +18,7 @@ import _parts as P
 
 ASSET_ID = "disconnect_switch_cb"
 COLUMN_X = 2.3
-BEAM_TOP = 2.5
+BEAM_TOP = 4.0
 COLUMN_BASE = BEAM_TOP + 0.2
 COLUMN_HEIGHT = 2.3
 BLADE_Z = COLUMN_BASE + COLUMN_HEIGHT + 0.22
