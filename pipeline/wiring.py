@@ -85,6 +85,7 @@ class Wiring:
     collision: str
     layers: dict  # upper-case layer name -> its settings
     specs: tuple[SpanSpec, ...]
+    sag_variants_c: tuple[float, ...] = ()  # conductor temperatures of the SDF world's sag variants
 
     @property
     def empty(self) -> bool:
@@ -169,7 +170,8 @@ def load_wiring(site: config.Site) -> Wiring:
     if problems:
         raise UserError(site.path, "conductors", _listing(problems))
     return Wiring(types_path, types, float(options["temperature_c"]), float(options["snap_tolerance_m"]),
-                  tuple(budgets), options["collision"], layers, tuple(specs))
+                  tuple(budgets), options["collision"], layers, tuple(specs),
+                  tuple(float(t) for t in options.get("sag_variants_c", ())))
 
 
 def _listing(problems: list[str]) -> str:

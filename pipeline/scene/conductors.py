@@ -289,9 +289,12 @@ def _resistance(t: wsrc.ConductorType) -> dict:
     return {"r25_ohm_per_km": t.resistance_ohm_per_km[0], "r75_ohm_per_km": t.resistance_ohm_per_km[1]}
 
 
-def write_record(path: Path, spans: list[Span], wiring: wsrc.Wiring) -> None:
-    """conductors.json, a line per span (the file diffs by span)."""
+def write_record(path: Path, spans: list[Span], wiring: wsrc.Wiring, sdf_variants: list[dict] = ()) -> None:
+    """conductors.json, a line per span (the file diffs by span); with the SDF sag
+    variants (conductor_outputs.sdf_variants) when there are any."""
     data = record(spans, wiring)
+    if sdf_variants:
+        data["sdf_variants"] = list(sdf_variants)
     head = {k: v for k, v in data.items() if k != "spans"}
     lines = [json.dumps(s, sort_keys=True, separators=(",", ":")) for s in data["spans"]]
     text = json.dumps(head, sort_keys=True)[:-1] + ', "spans": [\n' + ",\n".join(lines) + "\n]}\n"
