@@ -81,12 +81,12 @@ def main() -> None:
     for i, (x, sign) in enumerate(((-COLUMN_X, 1.0), (COLUMN_X, -1.0)), start=1):
         joint = column(i, x, beam)
         P.parent_keep(blade_half(f"blade_{i}", (x, 0.0, BLADE_Z), sign), joint)
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out,
+             terminals=[(name, (sign * COLUMN_X, 0.0, BLADE_Z + 0.08)) for name, sign in (("a", -1), ("b", 1))])
     P.write_asset_toml(out, ASSET_ID, "switchgear",
                        "centre-break disconnector, one pole, two rotating post-insulator columns",
                        budgets=(0.003, 0.015, 0.06), collision="hull_per_link",
-                       triangle_budget=100000, mass_kg=650.0,
-                       terminals=[(name, (sign * COLUMN_X, 0.0, BLADE_Z + 0.08)) for name, sign in (("a", -1), ("b", 1))])
+                       triangle_budget=100000, mass_kg=650.0)
 
 
 if __name__ == "__main__":
