@@ -86,7 +86,8 @@ class LiveWires:
         """Each group's temperature now (None: not yet set, the spans are as built): its
         own render input, else render.conductors.temperature (every span's)."""
         every = render_values.get(CONDUCTORS_STATE, {}).get("temperature")  # a scenario's, as `twin run` reads it
-        return {name: render_values.get(group_state(name), {}).get("temperature", every) for name in sorted(self.groups)}
+        return {name: render_values.get(group_state(name), {}).get("temperature", every)
+                for name in sorted(self.groups)}
 
     def _tension(self, span: dict, temperature_c: float | None) -> float:
         t = self.types[span["type"]]

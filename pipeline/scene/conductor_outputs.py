@@ -203,7 +203,8 @@ def sdf_variants(spans: list[Span], temperatures, scene_folder: Path) -> list[di
         root = etree.Element("sdf", version=SDF_VERSION)
         model = etree.SubElement(root, "model", name=MODEL)  # the entity keeps its name when a world swaps it in
         etree.SubElement(model, "static").text = "true"
-        _merged_visuals(etree.SubElement(model, "link", name="spans"), moved, folder / "meshes", f"model://{name}/meshes")
+        link = etree.SubElement(model, "link", name="spans")
+        _merged_visuals(link, moved, folder / "meshes", f"model://{name}/meshes")
         (folder / "model.sdf").write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8",
                                                           pretty_print=True))
         config = etree.Element("model")
