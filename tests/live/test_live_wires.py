@@ -148,3 +148,62 @@ def test_the_recording_draws_each_span_as_a_line(wired):
     z = [p["z"] for p in line["points"]]
     assert len(z) == 25 and z[0] == pytest.approx(12.0) and z[-1] == pytest.approx(12.0)
     assert 12.0 - min(z) == pytest.approx(sag, abs=1e-6)  # 24 segments: the midpoint is a vertex
+
+
+def _record() -> dict:
+    return {"temperature_c": 25.0, "types": {"RAIL": RAIL, "BARE": BARE},
+            "spans": [_span("R-1.a~R-2.a", "RAIL", LEVEL, RAIL), _span("R-1.b~R-2.b", "BARE", INCLINED, BARE)]}
+
+
+def test_a_scenarios_conductors_temperature_moves_every_group():
+    """A scenario's render.conductors.temperature (as `twin run` reads it) moves every
+    group; a group's own input wins; without either a span is as built."""
+    from pipeline.live.wires import LiveWires
+
+    record = _record()
+    wires = LiveWires(record)
+    assert wires.temperatures({}) == {"BARE": None, "RAIL": None}
+    assert wires.sags("RAIL", None) == {"R-1.a~R-2.a": record["spans"][0]["sag_m"]}
+    every = {"conductors": {"temperature": 60.0}}
+    assert wires.temperatures(every) == {"BARE": 60.0, "RAIL": 60.0}
+    assert wires.temperatures({**every, "conductors_RAIL": {"temperature": 70.0}}) == {"BARE": 60.0, "RAIL": 70.0}
+    assert set(wires.changes(every)) == {"BARE", "RAIL"} and wires.changes(every) == {}
+    assert set(wires.changes({**every, "conductors_RAIL": {"temperature": 70.0}})) == {"RAIL"}
+    assert wires.sags("RAIL", 60.0)["R-1.a~R-2.a"] == pytest.approx(_level_sag(60.0), abs=1e-6)
+
+
+class _Bridge:
+    def __init__(self):
+        self.sent, self.failed, self.calls = {}, {}, []
+
+    def sun(self, *a):
+        self.calls.append(("sun", a))
+
+    def joint(self, *a):
+        self.calls.append(("joint", a))
+
+    def visual(self, *a):
+        self.calls.append(("visual", a))
+
+    def close(self):
+        pass
+
+
+def test_gazebo_lists_the_conductors_as_not_applied(tmp_path):
+    from pipeline.live.app import make_server
+    from pipeline.live.outside import GazeboOut
+
+    build, sources, _ = live_scene.make(tmp_path)
+    (build / "scene" / "conductors.json").write_text(json.dumps(_record()))
+    twin = make_server(build, sources, render=False, foxglove=False, start=START).twin
+    twin.advance(0)
+    out = GazeboOut("sample", bridge=_Bridge())
+    out.push(twin)
+    assert any(n.startswith("conductors (sag:") for n in out.status()["not_applied"])
+    # without conductors nothing is said of them
+    plain, sources2, _ = live_scene.make(tmp_path / "plain")
+    twin = make_server(plain, sources2, render=False, foxglove=False, start=START).twin
+    twin.advance(0)
+    out = GazeboOut("sample", bridge=_Bridge())
+    out.push(twin)
+    assert not any(n.startswith("conductors") for n in out.status()["not_applied"])
