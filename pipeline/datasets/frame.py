@@ -19,7 +19,7 @@ from ..perception.gauge import dial_of
 from ..render import appearance
 from ..render.sensor import PhoneCamera, clipped, develop, metered_gain, metered_white_balance
 from ..runtime.site import BuiltSite, load_site
-from . import config as dataset_config, labels
+from . import config as dataset_config, labels, wire_labels
 from .plan import FramePlan, Planner, switch_angles
 
 _WORKER: dict = {}  # the scene a Blender process keeps between frames of one dataset
@@ -71,8 +71,8 @@ def open_scene(site: BuiltSite, cam: PhoneCamera, seed: int, tags: list[str], lo
     cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
     category_of = {p["tag"]: cats.get(site.manifests.get(p["asset"], {}).get("category") or p["asset"], 0)
                    for p in site.placements}
-    return {"site": site, "cam": cam, "scene": scene, "ids": ids, "tag_of": {v: k for k, v in ids.items()},
-            "category_of": category_of, "looks": looks}
+    return wire_labels.attach({"site": site, "cam": cam, "scene": scene, "ids": ids,
+                               "tag_of": {v: k for k, v in ids.items()}, "category_of": category_of, "looks": looks})
 
 
 def shoot(ctx: dict, plan: FramePlan, labels_as_lights: bool = False) -> dict:
@@ -107,7 +107,7 @@ def shoot(ctx: dict, plan: FramePlan, labels_as_lights: bool = False) -> dict:
     rgb = develop(linear, gain, veil, wb, cam, seed=plan.seed)
     clip = clipped(linear, gain, veil, wb)
     t2 = time.perf_counter()
-    ids, depth, parts = scene.render_labels(as_lights=labels_as_lights)
+    ids, depth, parts = wire_labels.label_frame(ctx, shot, *scene.render_labels(as_lights=labels_as_lights))
     t3 = time.perf_counter()
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
     record = _record(ctx, plan, k, ids, depth, gain, wb, float(veil.mean()), clip)
@@ -165,7 +165,7 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
             wb: np.ndarray, veil: float, clip: np.ndarray) -> dict:
     shot, fid = plan.shot, plan.frame_id
     kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
-    return {
+    record = {
         "frame_id": fid, "index": plan.index, "seed": plan.seed,
         "image": f"images/{fid}.png", "mask": f"masks/{fid}.png", "depth": f"depth/{fid}.npy",
         "camera": {"name": plan.camera, "K": kmat, "pose": shot.cam_pose.tolist(), "width": k["width"],
@@ -189,3 +189,4 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
                                 "reaches full scale in a channel, before noise"},
         "annotations": labels.annotations(ids, ctx["tag_of"], ctx["category_of"]),
     }
+    return wire_labels.add_to_record(ctx, record, ids, shot)

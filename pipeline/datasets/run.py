@@ -41,7 +41,7 @@ from ..engine.executors import EXECUTORS, outcome
 from ..engine.worker import Workers, run_task
 from ..errors import UserError
 from ..files import atomic_write
-from . import config as dataset_config, labels
+from . import config as dataset_config, labels, wire_labels
 from .blender_process import render_frame
 from .plan import Planner, frame_id
 from ..runtime.site import BuiltSite, load_site
@@ -148,7 +148,7 @@ def _assemble(folder: Path, cfg, site: BuiltSite, n: int) -> None:
     coco = {"info": {"description": f"substation-twin dataset {cfg.name}", "version": cfg.digest[:12],
                      "year": int(records[0]["local_time"][:4]) if records else 0},
             "licenses": [], "images": images, "annotations": anns,
-            "categories": labels.categories(site.manifests)}
+            "categories": wire_labels.categories(site, labels.categories(site.manifests))}
     atomic_write(folder / "coco.json", json.dumps(coco, sort_keys=True, separators=(",", ":")) + "\n")
     parts = [{"image_id": i + 1, **a} for i, r in enumerate(records) for a in r.get("part_annotations", [])]
     parts = [{"id": j + 1, **a} for j, a in enumerate(parts)]

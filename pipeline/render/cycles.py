@@ -18,6 +18,7 @@ from .. import sun as sun_model
 from ..perception.gauge import POINTER
 from ..geometry.pinhole import look_at, project
 from .sensor import PhoneCamera
+from . import conductors
 from ..runtime.site import Shot, BuiltSite
 
 class CyclesScene:
@@ -70,6 +71,7 @@ class CyclesScene:
         self.prototypes: dict[str, str] = {}  # asset -> tag imported first
         self._rest: dict[str, dict[str, object]] = {}  # tag -> link -> rest matrix_basis (set_joints)
         self._hidden: dict[str, bool] = {}  # tag -> hidden from renders, as show_only last set it
+        self.wires: conductors.CyclesWires | None = None  # the spans (load_terrain), always shown
         self._world()
         self._camera()
         self.tmp = Path(tempfile.mkdtemp(prefix="twin_render_"))
@@ -153,9 +155,13 @@ class CyclesScene:
         self.roots[tag], self.objects[tag] = root, objs
 
     def load_terrain(self) -> None:
+        """The site's fixed furniture: the ground and the conductors strung over it."""
         if self.site.terrain and "__terrain__" not in self.roots:
             root, objs = self._import(self.site.build / "models" / self.site.terrain / f"{self.site.terrain}.glb")
             self.roots["__terrain__"], self.objects["__terrain__"] = root, objs
+        if self.wires is None:
+            wires = conductors.load(self.site.build)
+            self.wires = None if wires is None else conductors.CyclesWires(self.bpy, self.scene.collection, wires)
 
     def _import(self, glb: Path):
         bpy = self.bpy
@@ -225,6 +231,8 @@ class CyclesScene:
         cam.data.angle = shot.lens.hfov
         cam.data.clip_start, cam.data.clip_end = shot.lens.near, shot.lens.far
         self._set_sky(shot)
+        if self.wires is not None:
+            self.wires.follow(shot.conductor_temperature_c)
         for vs in shot.visual_states:
             objs = self.objects.get(vs.tag)
             if objs is None or vs.visual not in objs:

@@ -48,8 +48,9 @@ def scenario_shots(scenario_path: Path, site: BuiltSite, every: int = 1) -> tupl
             if vals:
                 states[ob.tag] = vals
         when = (scenario.start + dt.timedelta(seconds=t)).astimezone(scenario.zone)
+        wires = data.conductor_temperature[i] if data.conductor_temperature else None
         shots.append(Shot(when, pose, camera_model.lens(zoom), el, az, irr,
-                          states, frame, target))
+                          states, frame, target, wires))
     return scenario, shots
 
 

@@ -110,6 +110,7 @@ class Shot:
     states: dict = field(default_factory=dict)  # tag -> {variable: value}
     visual_states: list = field(default_factory=list)  # nodes.VisualState
     target: str = ""
+    conductor_temperature_c: float | None = None  # None: the spans as conductors.json records them
 
     @property
     def sun_dir(self) -> np.ndarray:
