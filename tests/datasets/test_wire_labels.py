@@ -23,7 +23,7 @@ EYE = np.array([0.0, 0.0, 10.0])
 NEAR, FAR = 0.1, 1000.0
 
 
-def _span(sid: str, p0, p1, sag: float, terminals=("G-1.a", "G-2.b"), segments: int = 24) -> dict:
+def span_record(sid: str, p0, p1, sag: float, terminals=("G-1.a", "G-2.b"), segments: int = 24) -> dict:
     """A span record as conductors.json holds it, from its sag at 25 deg C."""
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     curve = cat.from_sag(p0, p1, sag)
@@ -33,10 +33,12 @@ def _span(sid: str, p0, p1, sag: float, terminals=("G-1.a", "G-2.b"), segments: 
             "temperature_c": 25.0, "lod": 0, "lods": [{"segments": segments}]}
 
 
+TYPES = {"T": {"diameter_m": DIAMETER, "ea_n": 3.0e7, "alpha_per_k": 2.0e-5, "bundle_count": 1,
+               "bundle_offsets_m": [[0.0, 0.0]]}}
+
+
 def _wires(*spans) -> Wires:
-    types = {"T": {"diameter_m": DIAMETER, "ea_n": 3.0e7, "alpha_per_k": 2.0e-5, "bundle_count": 1,
-                   "bundle_offsets_m": [[0.0, 0.0]]}}
-    return Wires(Path("conductors.json"), sorted(spans, key=lambda s: s["id"]), types)
+    return Wires(Path("conductors.json"), sorted(spans, key=lambda s: s["id"]), TYPES)
 
 
 def _camera():
@@ -49,7 +51,7 @@ def _level_wire_at_row(row: float, distance: float = 100.0) -> dict:
     projects onto image row `row` (v = row + 0.5: the middle of the row)."""
     _, k = _camera()
     z = EYE[2] + (k["cy"] - (row + 0.5)) * distance / k["fy"]
-    return _span("G-1.a~G-2.b", (-20.0, distance, z), (20.0, distance, z), sag=1e-4 * 40.0)
+    return span_record("G-1.a~G-2.b", (-20.0, distance, z), (20.0, distance, z), sag=1e-4 * 40.0)
 
 
 def test_a_sub_pixel_wire_at_100_m_is_a_continuous_one_pixel_line_hidden_behind_what_is_in_front():
