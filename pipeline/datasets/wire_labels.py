@@ -47,7 +47,7 @@ class WireLabels:
         from ..errors import UserError
 
         first = max(placement_ids.values(), default=0) + 1
-        if first + len(wires.spans) > 65535:
+        if first + len(wires.spans) - 1 > 65535:
             raise UserError(wires.path, None, f"{first - 1} placements and {len(wires.spans)} spans "
                                               "do not fit a 16-bit mask")
         ids, ends = {}, {}
@@ -116,7 +116,11 @@ class WireLabels:
 
 
 def category(categories: list[dict]) -> dict:
-    """The `conductor` category appended after the equipment's (their ids unchanged)."""
+    """The `conductor` category: appended after the equipment's (their ids unchanged),
+    or theirs when an asset's category is already named so."""
+    same = [c for c in categories if c["name"] == CATEGORY]
+    if same:
+        return same[0]
     return {"id": max((c["id"] for c in categories), default=0) + 1, "name": CATEGORY, "supercategory": CATEGORY}
 
 
@@ -152,7 +156,7 @@ def categories(site, equipment: list[dict]) -> list[dict]:
     site has spans. Its id follows theirs, so a site without spans keeps its ids."""
     from ..render.conductors import load
 
-    if load(site.build) is None:
+    if load(site.build) is None or any(c["name"] == CATEGORY for c in equipment):
         return equipment
     return [*equipment, category(equipment)]
 

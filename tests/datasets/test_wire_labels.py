@@ -4,6 +4,7 @@ annotation's RLE decodes to its mask."""
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -181,3 +182,29 @@ def test_a_span_id_that_is_a_placement_tag_is_refused():
     with pytest.raises(UserError, match="placement's tag"):
         WireLabels.of(_wires({**span, "id": "G-1"}), {"G-1": 1})
     assert WireLabels.of(None, {"G-1": 1}) is None
+
+
+def test_the_conductor_category_follows_the_equipments_only_when_the_site_has_spans(tmp_path):
+    from types import SimpleNamespace
+
+    from pipeline.errors import UserError
+
+    equipment = [{"id": 1, "name": "breaker", "supercategory": "equipment"},
+                 {"id": 2, "name": "reactor", "supercategory": "equipment"}]
+    site = SimpleNamespace(build=tmp_path)
+    assert wire_labels.categories(site, equipment) == equipment  # no conductors.json
+    record = tmp_path / "scene" / "conductors.json"
+    record.parent.mkdir()
+    record.write_text(json.dumps({"temperature_c": 25.0, "types": {}, "spans": []}))
+    assert wire_labels.categories(site, equipment) == equipment  # no span
+    record.write_text(json.dumps({"temperature_c": 25.0, "types": TYPES, "spans": [_level_wire_at_row(5)]}))
+    assert wire_labels.categories(site, equipment) == [*equipment, {"id": 3, "name": "conductor",
+                                                                    "supercategory": "conductor"}]
+    own = [*equipment, {"id": 3, "name": "conductor", "supercategory": "equipment"}]
+    assert wire_labels.categories(site, own) == own and wire_labels.category(own)["id"] == 3
+    record.write_text(json.dumps({"temperature_c": 25.0, "types": {}, "spans": [_level_wire_at_row(5)]}))
+    with pytest.raises(UserError, match="G-1.a~G-2.b.*type 'T' is not in its types"):
+        wire_labels.categories(site, equipment)
+    record.write_text("{")
+    with pytest.raises(UserError, match="conductors.json.*not a conductors record"):
+        wire_labels.categories(site, equipment)
