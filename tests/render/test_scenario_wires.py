@@ -1,0 +1,56 @@
+"""`twin render SCENARIO`: each shot carries the conductor temperature the scenario's
+graph gives the render node (render.conductors.temperature), which the Cycles scene
+strings its spans at (test_conductors_cycles)."""
+
+from __future__ import annotations
+
+from helpers import SOURCES
+
+LOAD = """
+[[nodes]]
+id = "load"
+type = "linear"
+params = { gain = 10.0, offset = 300.0, unit_in = "s", unit_out = "A" }
+
+[[nodes]]
+id = "wire"
+type = "conductor_thermal"
+params = { diameter_m = 0.03, r25_ohm_per_km = 0.0728, r75_ohm_per_km = 0.0869, ambient_c = 30.0 }
+
+[[edges]]
+from = "clock.t"
+to = "load.x"
+type = "float"
+unit = "s"
+
+[[edges]]
+from = "load.y"
+to = "wire.current"
+type = "float"
+unit = "A"
+
+[[edges]]
+from = "wire.temperature"
+to = "render.conductors.temperature"
+type = "float"
+unit = "degC"
+"""
+
+
+def test_a_scenarios_shots_carry_its_conductor_temperature(sample_build, tmp_path):
+    from pipeline.render.scenario import scenario_shots
+    from pipeline.runtime import run
+    from pipeline.runtime.graph import load_scenario
+    from pipeline.runtime.site import load_site
+
+    scenario = tmp_path / "oil_leak_loaded.toml"
+    scenario.write_text((SOURCES / "scenarios" / "oil_leak.toml").read_text() + LOAD)
+    site = load_site(sample_build, SOURCES)
+    _, shots = scenario_shots(scenario, site, every=20)
+    data, _ = run.simulate(load_scenario(scenario, site.zone), run.load_observed(sample_build))
+    expected = data.conductor_temperature[::20]
+    assert [s.conductor_temperature_c for s in shots] == expected
+    assert len(expected) == 4 and 30.0 < expected[0] < expected[-1]  # the load rises, so does the heat
+
+    _, plain = scenario_shots(SOURCES / "scenarios" / "oil_leak.toml", site, every=20)
+    assert [s.conductor_temperature_c for s in plain] == [None] * 4  # nothing wired: the built scene's
