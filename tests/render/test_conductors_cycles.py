@@ -27,12 +27,12 @@ W, H = 160, 120
 
 @pytest.fixture(scope="module")
 def frames(tmp_path_factory):
-    """(ctx, {temperature: (rgb, ids, depth, record, cycles' own ids, cycles' own depth)},
+    """(ctx, {temperature: (rgb, ids, depth, record, cycles' own ids, cycles' own depth, parts)},
     the lowest vertex of the span's mesh per temperature, linear renders with and
     without the wire)."""
     pytest.importorskip("bpy")
     from pipeline.datasets.plan import FramePlan
-    from pipeline.datasets.run import open_scene, shoot
+    from pipeline.datasets.frame import open_scene, shoot
     from pipeline.render.sensor import PhoneCamera
     from pipeline.runtime import camera as camera_model
     from pipeline.runtime.site import BuiltSite, Shot
@@ -52,8 +52,10 @@ def frames(tmp_path_factory):
             shot = Shot(when, pose, camera_model.lens(1.0), math.radians(55.0), math.radians(40.0), 700.0,
                         conductor_temperature_c=temperature)
             plan = FramePlan(0, "000000", 7, "test", shot, 1.0, 0.2, {}, {}, [])
-            rgb, ids, depth, record = shoot(ctx, plan)
-            out[temperature] = (rgb, ids, depth, record, *ctx["scene"].render_labels())
+            shot = shoot(ctx, plan)
+            cycles_ids, cycles_depth, _ = ctx["scene"].render_labels()
+            out[temperature] = (shot["rgb"], shot["ids"], shot["depth"], shot["record"], cycles_ids, cycles_depth,
+                                shot["parts"])
         with_wire = ctx["scene"].render()  # at 80 deg C, as last shot
         ctx["scene"].wires.objects[SPAN].hide_render = True
         without = ctx["scene"].render()
@@ -76,12 +78,13 @@ def test_cycles_centre_hits_lie_on_the_rasterized_wire_and_the_labels_fill_the_g
     ctx, out, _, _ = frames
     iid = ctx["wires"].ids[SPAN]
     assert iid == 1  # no placement: the span is the first instance
-    _, ids, depth, record, cycles_ids, cycles_depth = out[None]
+    _, ids, depth, record, cycles_ids, cycles_depth, parts = out[None]
     hits, labelled = cycles_ids == iid, ids == iid
     width_px = DIAMETER * (W / 2 / math.tan(1.047 / 2)) / np.linalg.norm((P0 + P1) / 2 - EYE)
     assert width_px < 0.3
     assert hits.sum() >= 3 and (labelled & hits).sum() == hits.sum()  # Cycles' hits are on the raster
     assert labelled.sum() > 3 * hits.sum()  # a thin wire is hit by few pixel centres
+    assert not parts[labelled].any()  # a wire is no part
     assert np.allclose(depth[hits], cycles_depth[hits], atol=DIAMETER)  # the same geometry, the same depth
     from scipy import ndimage
 
