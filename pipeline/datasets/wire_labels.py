@@ -106,11 +106,14 @@ class WireLabels:
         return out
 
     def record(self, ids: np.ndarray, temperature_c: float | None) -> dict:
-        """The frame record's `conductors`: the temperature drawn (None: each span at
-        conductors.json's) and the spans the frame shows, with their pixel counts."""
+        """The frame record's `conductors`: the temperature drawn and where it comes from
+        (the frame's state, or the built scene's: None if its spans differ), and the
+        spans the frame shows, with their pixel counts."""
         spans = self.tags()
         present, counts = np.unique(ids[ids >= min(spans)], return_counts=True)
-        return {"temperature_c": temperature_c,
+        built = {float(s["temperature_c"]) for s in self.wires.spans}
+        drawn = temperature_c if temperature_c is not None else (built.pop() if len(built) == 1 else None)
+        return {"temperature_c": drawn, "temperature_from": "built scene" if temperature_c is None else "state",
                 "spans": [{"instance_id": int(i), "span": spans[int(i)], **self.ends[spans[int(i)]], "pixels": int(n)}
                           for i, n in zip(present, counts) if int(i) in spans]}
 

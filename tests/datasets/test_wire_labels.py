@@ -109,6 +109,8 @@ def test_the_conductor_annotation_decodes_to_its_mask_and_names_its_span_and_end
     assert (ann["tag"], ann["span"], ann["from"], ann["to"], ann["tags"]) == (
         span["id"], span["id"], "G-1.a", "G-2.b", ["G-1", "G-2"])
     record = wl.record(out_ids, None)
+    assert (record["temperature_c"], record["temperature_from"]) == (25.0, "built scene")
+    assert wl.record(out_ids, 60.0)["temperature_c"] == 60.0
     assert record["spans"] == [{"instance_id": wl.ids[span["id"]], "span": span["id"], "from": "G-1.a",
                                 "to": "G-2.b", "tags": ["G-1", "G-2"], "pixels": int(mask.sum())}]
 

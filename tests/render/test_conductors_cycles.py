@@ -93,7 +93,7 @@ def test_cycles_centre_hits_lie_on_the_rasterized_wire_and_the_labels_fill_the_g
     assert cols.max() - cols.min() + 1 == len(cols) > 40  # across the view, no gap
     [ann] = [a for a in record["annotations"] if a["instance_id"] == iid]
     assert (ann["span"], ann["from"], ann["to"], ann["area"]) == (SPAN, "G-1.a", "G-2.b", int(labelled.sum()))
-    assert record["conductors"] == {"temperature_c": None, "spans": [
+    assert record["conductors"] == {"temperature_c": 25.0, "temperature_from": "built scene", "spans": [
         {"instance_id": iid, "span": SPAN, "from": "G-1.a", "to": "G-2.b", "tags": [None, None],
          "pixels": int(labelled.sum())}]}
 
@@ -123,4 +123,5 @@ def test_the_sag_follows_the_shots_conductor_temperature(frames):
     iid = ctx["wires"].ids[SPAN]
     rows = {t: np.nonzero(out[t][1] == iid)[0].mean() for t in out}
     assert rows[80.0] > rows[None]  # lower on the image
-    assert out[80.0][3]["conductors"]["temperature_c"] == 80.0
+    hot_record = out[80.0][3]["conductors"]
+    assert (hot_record["temperature_c"], hot_record["temperature_from"]) == (80.0, "state")
