@@ -60,7 +60,7 @@ class WireLabels:
         return cls(wires, ids, ends)
 
     def label(self, ids: np.ndarray, depth: np.ndarray, cam_pose: np.ndarray, hfov: float, near: float,
-              far: float, temperature_c: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+              far: float, temperature_c: float | dict | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The label pass's (instance ids (h, w) uint16, planar depth (h, w) float32)
         with every span's covered, unhidden pixels set to its id (copies)."""
         h, w = ids.shape
@@ -105,10 +105,11 @@ class WireLabels:
             out.append(a if sid is None else {**a, "span": sid, **self.ends[sid]})
         return out
 
-    def record(self, ids: np.ndarray, temperature_c: float | None) -> dict:
-        """The frame record's `conductors`: the temperature drawn and where it comes from
-        (the frame's state, or the built scene's: None if its spans differ), and the
-        spans the frame shows, with their pixel counts."""
+    def record(self, ids: np.ndarray, temperature_c: float | dict | None) -> dict:
+        """The frame record's `conductors`: the temperature drawn (one, or per conductor
+        type, None for a type as built) and where it comes from (the frame's state, or
+        the built scene's: None if its spans differ), and the spans the frame shows,
+        with their pixel counts."""
         spans = self.tags()
         present, counts = np.unique(ids[ids >= min(spans)], return_counts=True)
         built = {float(s["temperature_c"]) for s in self.wires.spans}

@@ -12,7 +12,7 @@ from ..datasets.plan import FramePlan, visible_tags
 from ..render.sensor import frame_seed
 from ..render.frames import shot_key
 from ..runtime import graph
-from ..runtime.nodes import CONDUCTORS_STATE, Observed, VisualMapper
+from ..runtime.nodes import Observed, VisualMapper
 from ..runtime.site import BuiltSite, Shot
 from .camera import LiveCamera
 from .default_scenario import DEFAULT_AEROSOL, switch_node, switchgear
@@ -199,7 +199,7 @@ class LiveTwin:
         lens = self.camera.lens()
         shot = Shot(self.instant(), self.camera.pose.copy(), lens, e, az, irr, levels,
                     self.mapper.states(values), self.camera.target,
-                    values.get(CONDUCTORS_STATE, {}).get("temperature"))
+                    self.wires.temperatures(values) if self.wires is not None else None)
         if seed is None:  # noise drawn from what the frame shows, with the run's seed
             seed = frame_seed(self.scenario.seed, shot_key(shot)) & 0x7FFFFFFF
         aerosol = self.engine.values.get(("aerosol", "value"), DEFAULT_AEROSOL)

@@ -52,23 +52,40 @@ class Wires:
     def radius(self, span: dict) -> float:
         return float(self.types[span["type"]]["diameter_m"]) / 2.0
 
-    def paths(self, temperature_c: float | None = None) -> dict[str, list[np.ndarray]]:
+    def paths(self, temperature_c: float | dict | None = None) -> dict[str, list[np.ndarray]]:
         """span id -> its subconductors' polylines, each (n, 3) float64 ENU, at
-        `temperature_c` (None: each span at the temperature conductors.json gives it).
+        `temperature_c`: one for every span, or per conductor type (a type missing or
+        None: as built); None: each span at the temperature conductors.json gives it.
         The last temperature's are kept: a run's frames mostly share one."""
-        key = None if temperature_c is None else float(temperature_c)
+        key = temperature_key(temperature_c)
         if key not in self._paths:
             out = {}
             for s in self.spans:
-                temp = s["temperature_c"] if key is None else key
+                temp = _span_temperature(s, key)
                 try:
-                    rel, _ = span_paths({**s, "lod": RENDER_LOD}, self.types, float(temp))
+                    rel, _ = span_paths({**s, "lod": RENDER_LOD}, self.types, temp)
                 except (cat.CatenaryError, ValueError) as e:
                     raise UserError(self.path, s["id"], f"no shape at {temp:g} deg C: {e}") from None
                 p0 = np.asarray(s["from"]["enu"], float)
                 out[s["id"]] = [p + p0 for p in rel]
             self._paths = {key: out}
         return self._paths[key]
+
+
+def temperature_key(temperature_c: float | dict | None):
+    """A shot's conductor temperature as a hashable key: None, a float, or sorted
+    (type, temperature) pairs."""
+    if temperature_c is None:
+        return None
+    if isinstance(temperature_c, dict):
+        return tuple(sorted((k, None if v is None else float(v)) for k, v in temperature_c.items()))
+    return float(temperature_c)
+
+
+def _span_temperature(span: dict, key) -> float:
+    if isinstance(key, tuple):
+        key = dict(key).get(span["type"])
+    return float(span["temperature_c"] if key is None else key)
 
 
 def load(build: Path) -> Wires | None:
@@ -102,7 +119,7 @@ class CyclesWires:
 
     def __init__(self, bpy, collection, wires: Wires):
         self.bpy, self.wires = bpy, wires
-        self.temperature: float | None = None
+        self.temperature = None  # temperature_key of the shape drawn
         self.objects: dict[str, object] = {}
         material = _material(bpy)
         for sid, paths in wires.paths(None).items():
@@ -118,13 +135,13 @@ class CyclesWires:
             collection.objects.link(ob)
             self.objects[sid] = ob
 
-    def follow(self, temperature_c: float | None) -> None:
-        """Every span's shape at `temperature_c` (None: the reference state); the
-        vertex count does not change, only the coordinates."""
-        key = None if temperature_c is None else float(temperature_c)
+    def follow(self, temperature_c: float | dict | None) -> None:
+        """Every span's shape at `temperature_c` (Wires.paths); the vertex count does
+        not change, only the coordinates."""
+        key = temperature_key(temperature_c)
         if key == self.temperature:
             return
-        for sid, paths in self.wires.paths(key).items():
+        for sid, paths in self.wires.paths(temperature_c).items():
             ob = self.objects[sid]
             verts, _ = _tubes(paths, self.wires.radius(self.wires.span(sid)), np.array(ob.location, float))
             ob.data.vertices.foreach_set("co", verts.astype(np.float32).ravel())

@@ -110,7 +110,8 @@ class Shot:
     states: dict = field(default_factory=dict)  # tag -> {variable: value}
     visual_states: list = field(default_factory=list)  # nodes.VisualState
     target: str = ""
-    conductor_temperature_c: float | None = None  # None: the spans as conductors.json records them
+    # every span's (degC), or per conductor type (twin serve's groups); None: as built
+    conductor_temperature_c: float | dict[str, float | None] | None = None
 
     @property
     def sun_dir(self) -> np.ndarray:

@@ -210,3 +210,23 @@ def test_the_conductor_category_follows_the_equipments_only_when_the_site_has_sp
     record.write_text("{")
     with pytest.raises(UserError, match="conductors.json.*not a conductors record"):
         wire_labels.categories(site, equipment)
+
+
+def test_spans_take_one_temperature_or_their_types_and_stay_as_built_without():
+    """Wires.paths: a float moves every span, a dict each type's (twin serve's groups);
+    a type missing or None, and no temperature, keep the span as conductors.json has it."""
+    a = span_record("A", (-20.0, 100.0, 12.0), (20.0, 100.0, 12.0), sag=1.0)
+    b = {**span_record("B", (-20.0, 120.0, 12.0), (20.0, 120.0, 12.0), sag=1.0), "type": "U"}
+    wires = Wires(Path("conductors.json"), [a, b], {**TYPES, "U": TYPES["T"]})
+
+    def lowest(temperature):
+        return {sid: round(float(min(p[:, 2].min() for p in paths)), 9)
+                for sid, paths in wires.paths(temperature).items()}
+
+    built = lowest(None)
+    assert built == pytest.approx({"A": 11.0, "B": 11.0}, abs=1e-6)  # the sag conductors.json records
+    hot = lowest(80.0)
+    assert hot["A"] == hot["B"] < built["A"] - 0.05
+    assert lowest({"T": 80.0}) == {"A": hot["A"], "B": built["B"]}
+    assert lowest({"T": 80.0, "U": None}) == {"A": hot["A"], "B": built["B"]}
+    assert lowest({"U": 25.0}) == built  # the temperature it was built at

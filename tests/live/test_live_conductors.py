@@ -1,6 +1,6 @@
 """`twin serve` renders the conductors: a span strung across the live camera's view of
-the tiny live scene is in a render request's picture labels, at the temperature the
-live graph's conductor_thermal node gives it."""
+the tiny live scene is in a render request's picture and labels, at the temperature
+the live graph's conductor_thermal node gives its group (its conductor type)."""
 
 from __future__ import annotations
 
@@ -79,9 +79,12 @@ def test_a_live_render_shows_and_labels_the_wires_at_the_graphs_temperature(tmp_
     temperature = twin.get(["wire.temperature"])["wire.temperature"]
     assert temperature > 40.0
     cam, _, _ = sensor_of(config)
+    # conductors.json before the twin: its groups (a type each) take the scenario's temperature
+    (build / "scene" / "conductors.json").write_text(json.dumps(_strung_across(twin.camera.pose, 8.0, 4.0)))
+    twin = make_server(build, sources, scenario, port=0, sensor=config, render=False, foxglove=False).twin
+    twin.advance(2)
     plan = twin.frame_plan(cam.width, cam.height, seed=3)
-    assert plan.shot.conductor_temperature_c == temperature
-    (build / "scene" / "conductors.json").write_text(json.dumps(_strung_across(plan.shot.cam_pose, 8.0, 4.0)))
+    assert plan.shot.conductor_temperature_c == {"T": temperature}
     worker = RenderWorker(RenderJob(str(build), str(sources), cam, 1))
     try:
         out = worker.render(plan, mask=True, depth=False)
@@ -91,6 +94,6 @@ def test_a_live_render_shows_and_labels_the_wires_at_the_graphs_temperature(tmp_
     iid = 3  # after the two placements
     assert (mask == iid).sum() > 10
     wires = out["record"]["conductors"]
-    assert wires["temperature_c"] == temperature
+    assert (wires["temperature_c"], wires["temperature_from"]) == ({"T": temperature}, "state")
     assert [(s["instance_id"], s["span"], s["tags"]) for s in wires["spans"]] == [(iid, "R-1.a~R-2.a", ["R-1", "R-2"])]
     assert any(a.get("span") == "R-1.a~R-2.a" and a["instance_id"] == iid for a in out["record"]["annotations"])
