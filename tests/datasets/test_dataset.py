@@ -398,14 +398,15 @@ LABELS_BEFORE = {
     "depth/000003.npy": "56f63b2d8399aa3216b940c3d0c50bf712016c1f689a1530a1c9591462b2c6c3",
     "coco.json": "34df99f44ff8890dcbd2feb4fac776a99292a084b93beb1d9a3dc8d1742ad7dd",
 }
-# ... and with the sample's conductors (issue 35): frame 0 shows 4 spans on 17 pixels, all
+# ... and with the sample's conductors (issue 35): frame 0 shows 6 spans on 19 pixels, all
 # background before (a wire's depth on those pixels only); coco.json gains the conductor
-# category and their 4 annotations, the equipment's unchanged. Checked against a run of
-# main at c6ee4a5, whose labels had the hashes above.
+# category and their 6 annotations, the equipment's unchanged. Checked against a run of
+# main at 5ee185b, whose masks and depth had the hashes above (its coco.json another: the
+# equipment_support category it added).
 WITH_CONDUCTORS = {
-    "masks/000000.png": "ea6eda6439be574ae1aa3c3ff7db5bf816905ecf2dc622a242479d1b546aa369",
-    "depth/000000.npy": "c4c67706484b347e0a7a1f7ee3a27c2cd7359dce57a496cd78bdf728c51cf6cd",
-    "coco.json": "88b39fc1e7b48a15b45a2f9480a3befe0449c6ea72ef0e9e527f308fb9bb31c8",
+    "masks/000000.png": "842d6f9fb4b1a9bad9a043f25c1e5b81f745fcb5205821374d27dc87022aa7fa",
+    "depth/000000.npy": "5df11fa50c152b511acc39b0a5dde5d91414a3214471a95de73f22149f7c7d4c",
+    "coco.json": "a053f0e11ffdb9e2f7d5874f6419e31a11b877bedd314837c3d5d547e8735bf5",
 }
 
 
