@@ -95,7 +95,25 @@ def test_isp_noise_reduction_removes_salt_and_pepper():
     flat[rng.random((48, 64)) < 0.05] = 0.0  # dead samples of a 16-spp path tracer
     raw = sensor.develop(flat, 1.0, 0.0, cam=sensor.PhoneCamera(denoise=0.0))
     clean = sensor.develop(flat, 1.0, 0.0, cam=sensor.PhoneCamera())
-    assert (raw < 80).mean() > 0.03 and (clean < 80).mean() < 0.002
+    # lone specks and pairs go; the few clusters of three or more at this density stay,
+    # as a wire's corner would
+    assert (raw < 80).mean() > 0.03 and (clean < 80).mean() < 0.1 * (raw < 80).mean()
+
+
+def test_isp_noise_reduction_keeps_a_wire_one_pixel_wide():
+    """A dark conductor one pixel wide across a noisy sky keeps most of its contrast
+    through the ISP (a plain 3x3 median erased it), and a lone speck beside it goes."""
+    sky = np.full((48, 64, 3), 0.25, np.float32)
+    rows = np.clip(np.round(10 + 0.4 * np.arange(64)), 0, 47).astype(int)  # a sloping line, 8-connected
+    sky[rows, np.arange(64)] = 0.04
+    sky[40, 10] = 0.9  # a firefly
+    cam = sensor.PhoneCamera()
+    raw = sensor.develop(sky, 1.0, 0.0, cam=sensor.PhoneCamera(denoise=0.0), seed=3).astype(float).mean(axis=2)
+    out = sensor.develop(sky, 1.0, 0.0, cam=cam, seed=3).astype(float).mean(axis=2)
+    background = np.median(out)
+    contrast = (background - out[rows, np.arange(64)]) / (np.median(raw) - raw[rows, np.arange(64)])
+    assert np.median(contrast) > 0.6 and contrast.min() > 0.3
+    assert abs(out[40, 10] - background) < 10 < raw[40, 10] - np.median(raw)
 
 
 def test_ray_box_and_blocking():
