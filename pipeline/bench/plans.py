@@ -36,9 +36,12 @@ def _site_floorplan(sources: Path) -> str:
 
 
 def _shell(src: Path, dst: Path, scenarios: bool = True) -> tuple[Path, Path]:
-    """dst with site.toml (and scenarios) copied, assets/ linked; returns (src plan, dst plan)."""
+    """dst with site.toml and the tables beside it (the wiring's conductor types and
+    clearances: any top-level .toml) and scenarios copied, assets/ linked; returns
+    (src plan, dst plan)."""
     dst.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(src / "site.toml", dst / "site.toml")
+    for table in sorted(src.glob("*.toml")):
+        shutil.copy2(table, dst / table.name)
     if scenarios and (src / "scenarios").is_dir():
         shutil.copytree(src / "scenarios", dst / "scenarios", dirs_exist_ok=True)
     if not (dst / "assets").exists():
