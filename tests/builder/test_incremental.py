@@ -248,7 +248,8 @@ def test_no_op_plan_skips_the_config_checks_it_passed_before(mini_copy):
 
 
 ACTION_MODULES = {"source": "pipeline.builder.source_task", "geometry": "pipeline.builder.geometry_task",
-                  "asset": "pipeline.builder.package_task", "scene": "pipeline.builder.scene_task",
+                  "asset": "pipeline.builder.package_task", "placed": "pipeline.builder.placed_task",
+                  "scene": "pipeline.builder.scene_task",
                   "viewer": "pipeline.builder.viewer_task", "tiles": "pipeline.builder.tiles_task",
                   "viewer:libs": "pipeline.builder.libs_task"}
 
