@@ -314,12 +314,14 @@ def view(out: Path, port: int | None):
 @SOURCES
 @OUT
 @click.option("--quick", is_flag=True, help="fewer repeats and sizes (for tests)")
+@click.option("--section", "sections", multiple=True, metavar="NAME",
+              help="run only this section (repeatable), e.g. build, scale, gazebo, lod")
 @user_errors
-def bench(sources: Path, out: Path, quick: bool):
+def bench(sources: Path, out: Path, quick: bool, sections: tuple[str, ...]):
     """Speed against error for every stage; writes OUT/reports/bench.json and bench.html."""
     from .bench import run_bench
 
-    path = run_bench(sources, out, quick=quick)
+    path = run_bench(sources, out, quick=quick, only=list(sections) or None)
     click.echo(f"wrote {path}")
 
 

@@ -261,8 +261,8 @@ def every_asset_geometry_edit(ctx: Context, sources: Path, built: Path, cold_s: 
         finally:
             toml.write_text(original)
         run_build(ctx, sources, built, 2, f"edit_each_{asset}_restore")
-        chain = {f"geometry:{asset}", f"asset:{asset}"}  # and the scene and what reads it, if placed
-        if not chain <= set(r["ran"]) <= chain | {"scene", "viewer", "tiles"}:  # the figure would not be this edit's
+        chain = {f"geometry:{asset}", f"asset:{asset}"}  # and its view, the scene and what reads it, if placed
+        if not chain <= set(r["ran"]) <= chain | {f"placed:{asset}", "scene", "viewer", "tiles"}:  # not this edit's
             raise BuildFailed(f"editing {asset} ran {r['ran']}")
         per_asset[asset] = {"seconds": r["seconds"], "of_cold": r["seconds"] / cold_s, "ran": r["ran"]}
         runs.append(r)
@@ -416,7 +416,6 @@ def build_section(ctx: Context) -> dict:
     data["every_asset_geometry_edit"] = every_asset_geometry_edit(ctx, sources, built, data["cold_j2"]["time"]["median_s"])
     multiples = ctx.pick([1, 2], [1, 2, 5, 10])
     data["placements"] = placements(ctx, sources, built, multiples, ctx.pick(1, 3), ctx.pick(0.0, 60.0))
-    data["scale"] = scale_run(ctx, sources, built, ctx.pick(30, SCALE_PLACEMENTS), ctx.pick(10, SCALE_PILED))
     ctx.shared["built_sources"] = ctx.shared.get("scene_sources", sources)
     data["large_plan"] = large_plan(ctx, sources, max(multiples), 1, ctx.pick(1, 2), ctx.pick(0.0, 30.0))
     counts = ctx.pick([1], sorted({1, min(4, len(used))}))
@@ -466,9 +465,28 @@ def targets(d: dict) -> list[dict]:
         ("peak memory under 4 GB (whole tree, sampled sum)", tree / 1e9, 4.0, "GB"),
     ]
     rows += _large_plan_rows(d["large_plan"], cold2)
-    rows.append(_scale_row(d["scale"]))
-    rows += _scale_side_rows(d["scale"])
+    return _target_rows(rows)
+
+
+def _target_rows(rows: list[tuple]) -> list[dict]:
     return [{"target": t, "value": float(v), "limit": lim, "unit": u, "met": bool(v <= lim)} for t, v, lim, u in rows]
+
+
+def scale_section(ctx: Context) -> dict:
+    """The scale run (scale_run) as a section of its own, after the build section (in
+    its sample build, which it leaves holding the sample again) or alone (`twin bench
+    --section scale`: a cold build of the sample first)."""
+    built, sources = ctx.shared.get("built"), ctx.shared.get("built_sources")
+    if built is None or sources is None:
+        sources = plans.copy_sources(ctx.sources, ctx.work / "sources")
+        built = ctx.work / "built"
+        run_build(ctx, sources, built, 2, "scale_sample")
+    data = scale_run(ctx, sources, built, ctx.pick(30, SCALE_PLACEMENTS), ctx.pick(10, SCALE_PILED))
+    rows = [_scale_row(data), *_scale_side_rows(data),
+            (f"{data['placements']:,} placements: twin build peak memory under 4 GB (largest process, ru_maxrss)",
+             data["build"]["maxrss_bytes"] / 1e9, 4.0, "GB")]
+    data["targets"] = _target_rows(rows)
+    return data
 
 
 def _large_plan_rows(large: dict, sample_cold: float) -> list[tuple]:
@@ -549,7 +567,6 @@ def _all_series(d: dict):
     yield d["every_asset_geometry_edit"]
     yield from d["placements"].values()
     yield from d["unique_assets"].values()
-    yield {"runs": [d["scale"]["build"]]}
     large = d["large_plan"]
     yield from (large[k] for k in ("cold_j2", "cold_j1", "noop", "one_asset_edit", "one_asset_geometry_edit",
                                            "one_asset_source_edit") if large[k])

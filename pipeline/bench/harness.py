@@ -17,6 +17,7 @@ import time
 import traceback
 from pathlib import Path
 
+from ..errors import UserError
 from . import report, summary
 from .context import Context
 from .stats import machine
@@ -27,6 +28,7 @@ def _sections(results: dict):
 
     return [
         ("build", builds.build_section),
+        ("scale", builds.scale_section),
         ("gazebo", gazebo.gazebo_section),
         ("viewer", viewer.viewer_section),
         ("lod", sections.lod_section),
@@ -51,6 +53,10 @@ def _say(msg: str) -> None:
 def run_bench(sources: Path, out: Path, quick: bool = False, only: list[str] | None = None) -> Path:
     """Run the benchmarks on `sources`; returns the path of bench.html (bench.json beside it).
     `only`: names of the sections to run (default all)."""
+    unknown = sorted(set(only or ()) - {name for name, _ in _sections({})})
+    if unknown:
+        raise UserError(str(sources), None, f"no bench section {', '.join(unknown)} (the sections: "
+                        f"{', '.join(name for name, _ in _sections({}))})")
     sources, out = Path(sources).resolve(), Path(out)
     reports = out / "reports"
     reports.mkdir(parents=True, exist_ok=True)
@@ -81,8 +87,8 @@ def run_bench(sources: Path, out: Path, quick: bool = False, only: list[str] | N
             _say(f"scratch kept in {work}")
     doc["sections"] = results
     doc["summary"] = summary.rows(results)
-    build = results.get("build", {})
-    doc["targets"] = build.get("data", {}).get("targets", []) if build.get("ok") else []
+    doc["targets"] = [t for name in ("build", "scale") if results.get(name, {}).get("ok")
+                      for t in results[name]["data"].get("targets", [])]
     doc["total_s"] = time.perf_counter() - t_all
     doc["machine"]["load_average_at_end"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
     doc = report.clean(doc)

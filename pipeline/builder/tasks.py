@@ -24,6 +24,11 @@ So editing an asset's description, category, mass or triangle budget rewrites it
 package and leaves its geometry alone; editing an LOD budget reruns the last two and
 reads no source; editing the source reruns all three.
 
+For each placed asset, `placed:<id>` (builder.placed_task) writes what the scene and
+the tiles read of its package (.placed/<id>/view.json); they depend on that, not on
+the package: a description edit rewrites the package and stops at the view (the
+engine's early cutoff), so a large site's scene is not written again for it.
+
 After the scene (builder.scene_task, which also makes the terrain), the viewer's:
 
 - `viewer:libs` (builder.libs_task): three.js and CesiumJS from tools/node_modules
@@ -58,6 +63,7 @@ from ..engine.graph import Task
 from .layout import IR_FOLDER, SOURCE_FOLDER
 from .libs_task import build_libs
 from .package_task import WARM as PACKAGE_WARM, build_asset
+from .placed_task import VIEW_FOLDER, build_view
 from .scene_task import WARM as SCENE_WARM, build_scene, build_terrain
 from .source_task import build_source
 from .tiles_task import build_tiles
@@ -256,7 +262,13 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     terrain = Task(name="terrain", stage="terrain", action=build_terrain, args={"settings": settings},
                    params={"terrain": tname, "settings": settings}, code=code, outputs=(f"models/{tname}/",))
     placed_assets = sorted({pl.asset_id for pl in p.floorplan.placements})
-    packages = tuple(f"asset:{a}" for a in placed_assets)
+    view_code = code_of(build_view.__module__)
+    # what the scene reads of each package (builder.placed_task): an edit the view does
+    # not see (a description) reruns neither the scene nor the tiles
+    views = [Task(name=f"placed:{a}", stage="assets", action=build_view, args={"build": str(build), "asset": a},
+                  deps=(f"asset:{a}",), params={"asset": a}, code=view_code, outputs=(f"{VIEW_FOLDER}/{a}/",),
+                  previous_ok=(f"asset:{a}",)) for a in placed_assets]
+    packages = tuple(v.name for v in views)
     # a placed asset that fails in this build is placed from its last package, so one
     # broken source does not hold back every other asset's changes; a failed terrain
     # (the ground every placement stands on) blocks the scene
@@ -267,7 +279,7 @@ def scene_tasks(p: Plan, sources: Path, build: Path) -> list[Task]:
     scene = Task(name="scene", stage="scene", action=build_scene, args=args, inputs=scene_inputs,
                  deps=("terrain", *packages), params={"site": site.name}, code=code, outputs=("scene/",),
                  warm=SCENE_WARM, previous_ok=packages)
-    return [terrain, scene]
+    return [*views, terrain, scene]
 
 
 def terrain_settings(site: config.Site, platforms) -> dict:
@@ -292,6 +304,7 @@ def viewer_tasks(site: config.Site, sources: Path, build: Path, placed_assets: l
     args = {"sources": str(sources), "build": str(build)}
     scenarios = tuple(sorted((sources / "scenarios").glob("*.toml")))
     assets = tuple(f"asset:{a}" for a in placed_assets)
+    views = tuple(f"placed:{a}" for a in placed_assets)  # the tiles read what the scene does of a package
     installed = libs.manifests()
     tiles_code = code_of(build_tiles.__module__)
     return [
@@ -306,6 +319,6 @@ def viewer_tasks(site: config.Site, sources: Path, build: Path, placed_assets: l
              outputs=tuple(f"viewer/{n}" for n in page.PAGES) + ("viewer/app/", "viewer/data/")),
         Task(name="tiles", stage="scene", action=build_tiles,
              args={**args, "memo": memo, "memo_namespace": tiles_code}, inputs=(site.path.resolve(),),
-             deps=("scene", "terrain", *assets), params={"site": site.name}, code=tiles_code,
-             outputs=("tiles/",), previous_ok=assets),
+             deps=("scene", "terrain", *views), params={"site": site.name}, code=tiles_code,
+             outputs=("tiles/",), previous_ok=views),
     ]

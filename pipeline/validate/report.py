@@ -12,6 +12,7 @@ Counting rules:
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import json
 import os
@@ -27,6 +28,7 @@ from ..errors import UserError
 from ..files import atomic_write
 from ..findings import RULES, Finding, finding
 from . import external, gazebo
+from .cache import ResultCache
 from .checks import check_package
 
 REPORT_FORMAT = 1
@@ -142,13 +144,20 @@ def _usd_references(path: Path) -> external.ExternalResult:
 
 
 def _run_external(out: Path, sdf: list[Path], world: Path | None, usd: list[Path], scene_usd: Path | None,
-                  glb: list[Path], dae: list[Path], clock: _Clock) -> dict[str, list[external.ExternalResult]]:
-    """Every validator on its files; returns file (as given) -> results."""
+                  glb: list[Path], dae: list[Path], clock: _Clock,
+                  digests: dict[str, str] | None = None) -> dict[str, list[external.ExternalResult]]:
+    """Every validator on its files; returns file (as given) -> results. `digests`:
+    str(path) -> content hash; COLLADA files of the same bytes are checked once (the
+    schema's verdict names no path)."""
     models = out / "models"
     results: dict[str, list[external.ExternalResult]] = {}
 
     def add(path: Path, r: external.ExternalResult):
         results.setdefault(str(path), []).append(r)
+
+    alike: dict[str, list[Path]] = {}
+    for p in dae:
+        alike.setdefault((digests or {}).get(str(p)) or str(p), []).append(p)
 
     with ThreadPoolExecutor(max_workers=_WORKERS) as pool:
         # ign sdf (a subprocess each) and the COLLADA schema run beside USD, which
@@ -156,16 +165,20 @@ def _run_external(out: Path, sdf: list[Path], world: Path | None, usd: list[Path
         sdf_jobs = {pool.submit(clock.run, "ign sdf", external.ign_sdf, p, [models]): p for p in sdf}
         if world:
             sdf_jobs[pool.submit(clock.run, "ign sdf", external.ign_sdf_world, world, [models])] = world
-        dae_jobs = {pool.submit(clock.run, "collada schema", external.collada_schema, p): p for p in dae}
+        dae_jobs = {pool.submit(clock.run, "collada schema", external.collada_schema, same[0]): same
+                    for same in alike.values()}
         for p in usd + ([scene_usd] if scene_usd else []):
             add(p, clock.run("usd validation", external.usd_validation, p))
         if scene_usd:
             add(scene_usd, clock.run("usd validation", _usd_references, scene_usd))
         for p, r in zip(glb, clock.run("gltf validator", external.gltf_validator, glb)):
             add(p, r)
-        for jobs in (sdf_jobs, dae_jobs):
-            for fut, p in jobs.items():
-                add(p, fut.result())
+        for fut, p in sdf_jobs.items():
+            add(p, fut.result())
+        for fut, same in dae_jobs.items():
+            r = fut.result()
+            for p in same:
+                add(p, dataclasses.replace(r, target=str(p)))
     return results
 
 
@@ -202,15 +215,9 @@ def _scene_files(out: Path, placements: dict | None) -> tuple[str | None, dict[s
                        for ext in ("sdf", "usda", "glb")}
 
 
-def build_report(sources: Path, out: Path, progress=None) -> tuple[dict, dict]:
-    """(validation.json content, timings). Raises UserError when nothing was built.
-    `progress`: a progress.Bar that each check and validator run advances."""
-    out = Path(out)
-    models = out / "models"
+def _split_folders(models: Path) -> tuple[list[Path], dict[str, list[Path]]]:
+    """(package folders, base name -> its LOD variant folders)."""
     folders = sorted(d for d in models.iterdir() if d.is_dir()) if models.is_dir() else []
-    if not folders:
-        raise UserError(str(out), None, "nothing built yet: run twin build")
-    clock = _Clock(progress)
     variants: dict[str, list[Path]] = {}
     packages = []
     for d in folders:
@@ -219,51 +226,86 @@ def build_report(sources: Path, out: Path, progress=None) -> tuple[dict, dict]:
             variants.setdefault(m.group("base"), []).append(d)
         else:
             packages.append(d)
+    return packages, variants
 
+
+def _asset_entry(d: Path, manifest: dict, variants: list[Path], rows: list[dict], files: list[Path]) -> dict:
+    joints = _joint_rows(manifest)
+    links = [str(link.get("name")) for link in manifest.get("links", []) if isinstance(link, dict)]
+    return {
+        "id": d.name,
+        "category": str(manifest.get("category", "")),
+        "thumbnail": f"../models/{d.name}/thumbnail.png" if (d / "thumbnail.png").is_file() else None,
+        "lods": _lod_rows(manifest),
+        "links": links,
+        "root": _root(joints, links),
+        "joints": joints,
+        "lod_models": sorted(v.name for v in variants),
+        "findings": _sort_rows(rows),
+        "_files": files,
+    }
+
+
+def build_report(sources: Path, out: Path, progress=None) -> tuple[dict, dict]:
+    """(validation.json content, timings). Raises UserError when nothing was built.
+    `progress`: a progress.Bar that each check and validator run advances.
+    A package judged before as it is now (validate.cache) takes its verdicts from
+    build/.validate/; the others, and the scene, are judged now."""
+    out = Path(out)
+    models = out / "models"
+    packages, variants = _split_folders(models)
+    if not packages:
+        raise UserError(str(out), None, "nothing built yet: run twin build")
+    clock = _Clock(progress)
+    cache = ResultCache(out)
+    started = time.perf_counter()
+    keys = {d.name: cache.key(d.name, [d, *variants.get(d.name, [])]) for d in packages}
+    clock.seconds["cache keys"] = time.perf_counter() - started
+    cached = {name: hit for name, key in keys.items() if (hit := cache.get(key)) is not None}
     clock.expect(len(packages) + sum(map(len, variants.values())))  # package checks
-    assets, sdf, usd, glb, dae = [], [], [], [], []
+    assets = []
+    fresh: dict[str, list[Path]] = {"sdf": [], "usd": [], "glb": [], "dae": []}
     for d in packages:
         manifest = _read_json(d / "manifest.json") or {}
         rows = [_finding_row(stage, f) for stage, f in _manifest_findings(manifest)]
         for folder in [d, *variants.get(d.name, [])]:
             rows += [_finding_row("package", f) for f in clock.run("package checks", check_package, folder)]
         files = _package_files(d)
-        model_sdfs = [f / "model.sdf" for f in [d, *variants.get(d.name, [])] if (f / "model.sdf").is_file()]
-        sdf += model_sdfs
-        usd += files["usd"]
-        glb += files["glb"]
-        dae += files["dae"]
-        joints = _joint_rows(manifest)
-        links = [str(link.get("name")) for link in manifest.get("links", []) if isinstance(link, dict)]
-        assets.append({
-            "id": d.name,
-            "category": str(manifest.get("category", "")),
-            "thumbnail": f"../models/{d.name}/thumbnail.png" if (d / "thumbnail.png").is_file() else None,
-            "lods": _lod_rows(manifest),
-            "links": links,
-            "root": _root(joints, links),
-            "joints": joints,
-            "lod_models": sorted(v.name for v in variants.get(d.name, [])),
-            "findings": _sort_rows(rows),
-            "_files": model_sdfs + files["usd"] + files["glb"] + files["dae"],
-        })
+        files["sdf"] = [f / "model.sdf" for f in [d, *variants.get(d.name, [])] if (f / "model.sdf").is_file()]
+        if d.name not in cached:
+            for kind, paths in files.items():
+                fresh[kind] += paths
+        assets.append(_asset_entry(d, manifest, variants.get(d.name, []), rows,
+                                   files["sdf"] + files["usd"] + files["glb"] + files["dae"]))
 
     placements = _read_json(out / "scene" / "placements.json")
     site, scene_files = _scene_files(out, placements)
-    if scene_files["glb"]:
-        glb.append(scene_files["glb"])
+    glb = fresh["glb"] + ([scene_files["glb"]] if scene_files["glb"] else [])
     # ign sdf each, the world's, COLLADA each, USD each (the scene's twice), glTF at once, Gazebo
     scene_usd = 2 if scene_files["usda"] else 0
-    clock.expect(len(sdf) + bool(scene_files["sdf"]) + len(dae) + len(usd) + scene_usd + 1 + 1)
+    distinct_dae = len({cache.hashes.get(str(p), str(p)) for p in fresh["dae"]})
+    clock.expect(len(fresh["sdf"]) + bool(scene_files["sdf"]) + distinct_dae + len(fresh["usd"])
+                 + scene_usd + 1 + 1)
+    probed_packages = [d for d in packages if d.name not in cached]
     with ThreadPoolExecutor(max_workers=1) as side:
         # Gazebo's own loaders (processes of their own) beside the format validators
-        probe = side.submit(clock.run, "gazebo probe", _gazebo, models, scene_files["sdf"], packages, variants)
-        results = _run_external(out, sdf, scene_files["sdf"], usd, scene_files["usda"], glb, dae, clock)
+        probe = side.submit(clock.run, "gazebo probe", _gazebo, models, scene_files["sdf"], probed_packages, variants)
+        results = _run_external(out, fresh["sdf"], scene_files["sdf"], fresh["usd"], scene_files["usda"], glb,
+                                fresh["dae"], clock, cache.hashes)
         probed = probe.result()
 
     for a in assets:
+        if a["id"] in cached:
+            ext, found = cached[a["id"]]
+            for r in ext:
+                results.setdefault(str(Path(r.target)), []).append(r)
+        else:
+            found = probed.assets.get(a["id"], [])
+            if not probed.missing:  # no probe, no Gazebo verdict to keep
+                cache.put(keys[a["id"]], [r for p in a["_files"] for r in results.get(str(p), [])], found)
         a["external"] = _ext_rows(out, a.pop("_files"), results)
-        a["findings"] = _sort_rows(a["findings"] + [_finding_row("package", f) for f in probed.assets.get(a["id"], [])])
+        a["findings"] = _sort_rows(a["findings"] + [_finding_row("package", f) for f in found])
+    cache.save()
     scene_rows = []
     for d in (placements or {}).get("findings", []):
         try:
@@ -289,6 +331,7 @@ def build_report(sources: Path, out: Path, progress=None) -> tuple[dict, dict]:
         "scene": scene,
     }
     timings = {k: round(v, 6) for k, v in sorted(clock.seconds.items())}
+    timings["cached_packages"] = len(cached)
     if probed.figures:
         timings["gazebo"] = probed.figures
     return report, timings

@@ -51,19 +51,20 @@ def test_noop_edit_and_parameter_change(mini):
 
     nudge_source(sources / "assets" / "kiosk" / "kiosk.stl", 0.005)  # a real edit of one asset
     edit = explain(sources, out)
-    assert ran(edit) == {"source:kiosk", "geometry:kiosk", "asset:kiosk", "scene"} | AFTER_SCENE
+    assert ran(edit) == {"source:kiosk", "geometry:kiosk", "asset:kiosk", "placed:kiosk", "scene"} | AFTER_SCENE
     stl = "input <sources>/assets/kiosk/kiosk.stl"  # named inside the sources (they may move)
     assert edit["source:kiosk"]["changed"] == [stl]
     assert edit["geometry:kiosk"]["changed"] == ["dependency source:kiosk"]
     assert edit["asset:kiosk"]["changed"] == [stl, "dependency geometry:kiosk"]
-    assert edit["scene"]["changed"] == ["dependency asset:kiosk"]
+    assert edit["placed:kiosk"]["changed"] == ["dependency asset:kiosk"]
+    assert edit["scene"]["changed"] == ["dependency placed:kiosk"]
 
     # a parameter edit in asset.toml reruns exactly what uses it: an LOD budget, the
     # geometry and what follows, not the source read
     toml = sources / "assets" / "pole" / "asset.toml"
     toml.write_text(toml.read_text().replace("[0.004, 0.02]", "[0.004, 0.03]"))
     param = explain(sources, out)
-    assert ran(param) == {"geometry:pole", "asset:pole", "scene"} | AFTER_SCENE
+    assert ran(param) == {"geometry:pole", "asset:pole", "placed:pole", "scene"} | AFTER_SCENE
     assert param["geometry:pole"]["changed"] == ["parameters"]
     assert param["source:pole"]["reason"] == "up to date"
     # ... and of the LOD search, the edited level alone (the finer one is in the memo)
@@ -75,17 +76,17 @@ def test_noop_edit_and_parameter_change(mini):
     before = toml.read_text()
     toml.write_text('up_axis = "Y"\n' + before)
     axis = explain(sources, out)
-    assert ran(axis) == {"source:pole", "geometry:pole", "asset:pole", "scene"} | AFTER_SCENE
+    assert ran(axis) == {"source:pole", "geometry:pole", "asset:pole", "placed:pole", "scene"} | AFTER_SCENE
     assert axis["source:pole"]["changed"] == ["parameters"]
     toml.write_text(before)
     undone = explain(sources, out)
     assert ran(undone) == set()
-    assert {undone[t]["reason"] for t in ("source:pole", "geometry:pole", "asset:pole", "scene")} == {
+    assert {undone[t]["reason"] for t in ("source:pole", "geometry:pole", "asset:pole", "placed:pole", "scene")} == {
         "restored from cache"}
 
     toml.write_text("mass_kg = 175.0\n" + toml.read_text())
     metadata = explain(sources, out)
-    assert ran(metadata) == {"asset:pole", "scene"} | AFTER_SCENE
+    assert ran(metadata) == {"asset:pole", "placed:pole", "scene"} | AFTER_SCENE  # the mass is in model.sdf
     assert metadata["geometry:pole"]["reason"] == "up to date"
     sdf = (out / "models" / "pole" / "model.sdf").read_text()
     masses = [float(m) for m in re.findall(r"<mass>([^<]+)</mass>", sdf)]
@@ -95,13 +96,21 @@ def test_noop_edit_and_parameter_change(mini):
     documents = state["tasks"]["asset:pole"]["result"]["collada_documents"]
     assert documents["made"] == 0 and documents["linked"] > 0
 
+    # a description: the package again, and its view, the same, stops there (what the
+    # scene and the tiles read of a package is unchanged); the page shows the text
+    toml.write_text('description = "a pole, described again"\n' + toml.read_text())
+    described = explain(sources, out)
+    assert ran(described) == {"asset:pole", "placed:pole", "viewer"}
+    assert described["scene"]["reason"] == "up to date" and described["scene"]["cut_off_after"] == ["placed:pole"]
+
     # the source saved again with the same geometry (a comment added): read again, and
     # the LOD search, keyed on what the read made, does not run (the package does: its
     # manifest records the file's hash)
     obj = sources / "assets" / "pole" / "pole.obj"
     obj.write_text(obj.read_text() + "# saved again\n")
     resaved = explain(sources, out)
-    assert ran(resaved) == {"source:pole", "asset:pole", "scene"} | AFTER_SCENE
+    # ... and the view of it, which is the same: neither the scene nor the tiles run
+    assert ran(resaved) == {"source:pole", "asset:pole", "placed:pole", "viewer"}
     assert resaved["geometry:pole"]["reason"] == "up to date"
     assert resaved["geometry:pole"]["cut_off_after"] == ["source:pole"]
     assert "cut_off_after" not in resaved["geometry:kiosk"]  # its source did not run
@@ -157,7 +166,8 @@ def test_sample_one_asset_edit_reexports_only_its_chain(sample_build, tmp_path):
     # A cache of its own: the shared one would then hold the edited asset, and a
     # restored task is not a run one.
     edit = explain(sources, out, "--cache", tmp_path / "edit-cache")
-    assert ran(edit) == {"source:junction_box", "geometry:junction_box", "asset:junction_box", "scene"} | AFTER_SCENE
+    assert ran(edit) == {"source:junction_box", "geometry:junction_box", "asset:junction_box", "placed:junction_box",
+                         "scene"} | AFTER_SCENE
 
 
 # what a build makes (the shared sample build also holds what tests wrote beside it)
@@ -238,7 +248,8 @@ def test_no_op_plan_skips_the_config_checks_it_passed_before(mini_copy):
 
 
 ACTION_MODULES = {"source": "pipeline.builder.source_task", "geometry": "pipeline.builder.geometry_task",
-                  "asset": "pipeline.builder.package_task", "scene": "pipeline.builder.scene_task",
+                  "asset": "pipeline.builder.package_task", "placed": "pipeline.builder.placed_task",
+                  "scene": "pipeline.builder.scene_task",
                   "viewer": "pipeline.builder.viewer_task", "tiles": "pipeline.builder.tiles_task",
                   "viewer:libs": "pipeline.builder.libs_task"}
 

@@ -235,7 +235,8 @@ def test_one_unreadable_source_fails_its_chain_and_the_rest_builds(case):
     assert len(doc["errors"]) == 1 and "pole.obj" in doc["errors"][0]
     assert doc["not_built"] == {"geometry:pole": ["source:pole"], "asset:pole": ["source:pole"]}
     assert chains(doc["ran"]) == {"source:pole", "source:kiosk", "geometry:kiosk", "asset:kiosk", "scene"}
-    assert doc["why"]["scene"]["previous_of"] == ["asset:pole"]
+    # the scene reads packages through their views (builder.placed_task): pole's is made of its last package
+    assert doc["why"]["placed:pole"]["previous_of"] == ["asset:pole"]
     assert outputs(out, "pole") == pole  # byte for byte
     assert outputs(out, "kiosk") != kiosk and scene_files(out) != scene
 
@@ -324,7 +325,7 @@ def test_a_failure_in_any_task_of_a_chain_leaves_the_last_package(case, stage):
     later = ["source", "geometry", "asset"][["source", "geometry", "asset"].index(stage) + 1:]
     assert {n: b for n, b in r.blocked.items() if n in chains(r.blocked)} == {
         f"{s}:pole": [f"{stage}:pole"] for s in later}
-    assert _why(r)["scene"]["previous_of"] == ["asset:pole"]
+    assert _why(r)["placed:pole"]["previous_of"] == ["asset:pole"]  # the scene's view of pole's last package
     after = outputs(out, "pole")
     kept = {k: v for k, v in before.items() if k.startswith("models/")}
     assert {k: v for k, v in after.items() if k.startswith("models/")} == kept
