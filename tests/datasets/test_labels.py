@@ -135,6 +135,10 @@ def test_behind_the_glass_the_dial_is_labelled_and_the_glass_stays_glass():
     assert behind[3, 5] == behind[4, 5] == pid["gauge_dial"] and behind[3, 6] == pid["gauge_pointer"]
     assert behind[4, 6] == 0 and behind[0, 0] == 0  # nothing behind the glass there
     assert np.array_equal(behind[p != pid["gauge_glass"]], p[p != pid["gauge_glass"]])
+    # a code that is no part, nor a glass's (Cycles on a glass's rim): no part in either image
+    odd = code.copy()
+    odd[2, 2], odd[2, 3] = 132, SEE_THROUGH * pid["bushing"] + pid["gauge_dial"]
+    assert [int(a[2, c]) for a in parts.split(odd.astype(np.uint16)) for c in (2, 3)] == [0, 0, 0, 0]
     anns = {a["category_id"]: a for a in parts.part_annotations(ids, p, {3: "RE-A1"}, behind)}
     glass = (ids == 3) & (p == pid["gauge_glass"])
     assert np.array_equal(rle.decode(anns[pid["gauge_glass"]]["segmentation"]).astype(bool), glass)
