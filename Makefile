@@ -36,11 +36,12 @@ validate: $(STAMP)
 	$(BIN)/twin validate --sources $(SOURCES) --out $(OUT)
 
 # The suite on every core (pytest-xdist); tests that share a costly module fixture
-# run on one worker together (their xdist_group marks), the others one by one.
+# run on one worker together (their xdist_group marks), the others one by one; the
+# twenty slowest are listed at the end.
 TEST_WORKERS ?= auto
 
 test: $(STAMP) $(TOOLS)
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --durations=20
 
 bench: $(STAMP) $(TOOLS)
 	$(BIN)/twin bench --sources $(SOURCES) --out $(OUT)

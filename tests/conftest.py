@@ -6,6 +6,7 @@ copy or link what they change."""
 from __future__ import annotations
 
 import shutil
+import threading
 from pathlib import Path
 
 import pytest
@@ -20,17 +21,40 @@ def _build(sources: Path, out: Path, *args: str) -> None:
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-4000:]
 
 
+def _make_sample(folder: Path) -> None:
+    shutil.copytree(SOURCES, folder / "sources")
+    _build(folder / "sources", folder / "build")
+
+
+def _sample(tmp_path_factory) -> Path:
+    return made_once(tmp_path_factory, "sample", [SOURCES, CODE], _make_sample)
+
+
 @pytest.fixture(scope="session")
 def sample_build(tmp_path_factory) -> Path:
     """The sample substation built once per run: the tests that render, label,
     validate or view it share it. Built from a copy of sources/ beside it, as a
     checkout's build/ is (a task's key holds its inputs' paths relative to the build
-    folder: a copy of both folders side by side finds the build's cache entries)."""
-    def make(folder: Path) -> None:
-        shutil.copytree(SOURCES, folder / "sources")
-        _build(folder / "sources", folder / "build")
+    folder: a copy of both folders side by side finds the build's cache entries).
+    The build starts as soon as the tests are collected (pytest_collection_finish)."""
+    return _sample(tmp_path_factory) / "build"
 
-    return made_once(tmp_path_factory, "sample", [SOURCES, CODE], make) / "build"
+
+def pytest_collection_finish(session):
+    """Start the sample build in the background once the tests that need it are known:
+    the workers run the other tests meanwhile, and the first that needs the sample
+    waits on made_once's lock. The thread only waits on the build's process, and a
+    failed build is recorded by made_once for every asker to report."""
+    if any("sample_build" in getattr(item, "fixturenames", ()) for item in session.items):
+        factory = session.config._tmp_path_factory
+        threading.Thread(target=_build_quietly, args=(factory,), name="sample-build", daemon=True).start()
+
+
+def _build_quietly(factory) -> None:
+    try:
+        _sample(factory)
+    except BaseException:  # made_once recorded it; the fixture raises it where a test needs the sample
+        pass
 
 
 @pytest.fixture(scope="session")
@@ -86,12 +110,13 @@ def pytest_collection_modifyitems(config, items):
             shared.append(f"{name}[{spec.indices[name]}]" if spec is not None and name in spec.params else name)
         if shared:
             item.add_marker(pytest.mark.xdist_group(f"{item.module.__name__}:{'+'.join(shared)}"))
-    # The costly first, the quick ones last to fill the gaps: what needs the sample
-    # build (it starts at once), then the tests that share a module fixture.
+    # The costly first, the quick ones last to fill the gaps: the tests that share a
+    # module fixture while the sample builds in the background, then what needs the
+    # sample.
     items.sort(key=_cost_rank)
 
 
 def _cost_rank(item) -> int:
     if "sample_build" in getattr(item, "fixturenames", ()):
-        return 0
-    return 1 if item.get_closest_marker("xdist_group") else 2
+        return 1
+    return 0 if item.get_closest_marker("xdist_group") else 2

@@ -12,7 +12,7 @@ from lxml import etree
 
 from .. import ir
 from ..export.names import fmt, lod_model_name
-from ..scene import world_sdf
+from ..scene import world_collisions, world_sdf
 from ..scene.placements import Placed
 from .context import Context
 
@@ -60,7 +60,9 @@ def _placement_costs(ctx: Context, models: Path, record: dict) -> list[dict]:
         asset = variant.split("__lod")[0]
         members = [Placed(ir.Placement(f"p{k}", asset, "L1", pose[0], pose[1]), _at(pose[:3]), 0.0)
                    for k, pose in enumerate(poses)]
-        model = world_sdf.grouped_model(variant, models / variant / "model.sdf", members)
+        # as in the world: their collisions in the cells (amortized over a cell's many)
+        model = world_sdf.grouped_model(variant, models / variant / "model.sdf", members,
+                                        cells=world_collisions.CollisionCells(models))
         grouped = _world(ctx.work / "grp.sdf", etree.tostring(model, encoding="unicode"))
         row = {"variant": variant}
         for name, world in (("include", included), ("grouped", grouped)):

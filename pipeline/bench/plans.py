@@ -36,9 +36,12 @@ def _site_floorplan(sources: Path) -> str:
 
 
 def _shell(src: Path, dst: Path, scenarios: bool = True) -> tuple[Path, Path]:
-    """dst with site.toml (and scenarios) copied, assets/ linked; returns (src plan, dst plan)."""
+    """dst with the site's settings (site.toml and the other top-level .toml files it
+    reads beside it: conductors, clearances, study) and scenarios copied, assets/
+    linked; returns (src plan, dst plan)."""
     dst.mkdir(parents=True, exist_ok=True)
-    shutil.copy2(src / "site.toml", dst / "site.toml")
+    for settings in sorted(src.glob("*.toml")):
+        shutil.copy2(settings, dst / settings.name)
     if scenarios and (src / "scenarios").is_dir():
         shutil.copytree(src / "scenarios", dst / "scenarios", dirs_exist_ok=True)
     if not (dst / "assets").exists():

@@ -22,7 +22,13 @@ and groups the rest:
   A package without whole meshes (written before them) gets a copy of each of the
   variant's visuals and collisions, named `<TAG>__<name>` (`<TAG>__<link>__<name>`
   for a model of several links). A scaled placement's elements are posed at the
-  scaled offsets and their geometry scaled (mesh <scale>, box, cylinder, sphere).
+  scaled offsets and their geometry scaled (mesh <scale>, box, cylinder, sphere);
+- in the world, the grouped placements' collisions are not theirs but merged into a
+  few cells of ground (world_collisions: `collision_cells`, one mesh shape a cell),
+  and a placement that repeats another exactly (the same asset, scale and LOD at the
+  same pose: devices piled on one insertion point) is its frame alone, the first
+  drawing and colliding for both: at 5,000 placements one shape and one <collision>
+  each neither stepped in real time nor parsed within the budget.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ from .. import safe_xml
 from ..export.names import WHOLE_COLLISION_FILE, fmt, lod_model_name, whole_mesh_file
 from ..geometry.transform import matrix_to_xyz_rpy, xyz_rpy_to_matrix
 from .placements import Placed
+from .world_collisions import CollisionCells, placement_key
 
 # A placement's own elements in a grouped model: `<TAG>__<visual or collision name>`.
 GROUPED_SEPARATOR = "__"
@@ -95,12 +102,12 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     _text(inc, "static", "true")
 
     groups: dict[str, list[Placed]] = {}
-    collisions: set = set()  # (asset, scale, pose) of the whole collisions already in the world
+    cells, drawn = CollisionCells(Path(models)), set()
     for pl in sorted(placed, key=lambda p: p.placement.tag):
         variant = lod_model_name(pl.placement.asset_id, pl.lod)
         if pl.placement.scale != 1.0:
             world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag,
-                                       collisions=collisions))
+                                       cells=cells, drawn=drawn))
         elif pl.placement.asset_id in own_model:
             inc = etree.SubElement(world, "include")
             _text(inc, "uri", f"model://{variant}")
@@ -111,7 +118,10 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         else:
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
-        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, collisions=collisions))
+        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, cells=cells, drawn=drawn))
+    merged = cells.write(Path(path).parent)
+    if merged is not None:
+        world.append(merged)
     for model in extra_models:
         world.append(model)
     data = etree.tostring(sdf, pretty_print=True, xml_declaration=True, encoding="UTF-8")
@@ -148,17 +158,18 @@ def _scale_geometry(item, s: float) -> None:
 
 
 def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None,
-                  collisions: set | None = None) -> etree._Element:
+                  cells: CollisionCells | None = None, drawn: set | None = None) -> etree._Element:
     """One static model (named `name`, default the variant) with one link: per member
     placement a frame named by its TAG at its pose, and what it draws posed relative to
     that frame, at the placement's scale: the package's whole model at the variant's
     LOD and all its collision meshes, one <visual> and one <collision> (`<TAG>__whole`,
     `<TAG>__collision`), when the package has them (export.collada._write_whole); else
-    a copy of each of the variant's visuals and collisions. `collisions`: the whole
-    collisions already in the world (asset, scale, pose to 1 um and 1 nrad), shared by
-    every call for one world: a placement that would repeat one exactly (devices piled
-    on one insertion point) adds no second, which physics would only test against the
-    first at every step."""
+    a copy of each of the variant's visuals and collisions. `cells`: the world's merged
+    collisions, which take each member's collision instead when its package has the
+    whole collision mesh. `drawn`: the placements already in the world
+    (world_collisions.placement_key), shared by every call for one world: a member
+    that repeats one exactly (devices piled on one insertion point) is its frame alone,
+    the first one's visual and collision standing for both."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
     source_links = source.findall("link")
     model = etree.Element("model", name=name or variant)
@@ -171,11 +182,14 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
         frame = etree.Element("frame", name=tag, attached_to=GROUPED_LINK)
         _text(frame, "pose", " ".join(fmt(v) for v in (x, y, z, 0.0, 0.0, pl.yaw)))
         model.append(frame)
+        if drawn is not None:
+            key = placement_key(pl)
+            if key in drawn:
+                continue
+            drawn.add(key)
         collides = any(sl.find("collision") is not None for sl in source_links)
-        if collides and collisions is not None:
-            key = (pl.placement.asset_id, pl.placement.scale, *np.round(pl.pose[:3, 3], 6).tolist(), round(pl.yaw, 9))
-            collides = key not in collisions
-            collisions.add(key)
+        if collides and cells is not None and cells.add(pl):
+            collides = False
         whole = _whole_elements(models, pl, collides)
         if whole is not None:
             for item in whole:

@@ -144,7 +144,9 @@ def written_summary(path: Path) -> MeshSummary:
                 if name == "POSITION":
                     positions.append(data[:, :3] * scale)
                 elif name == "NORMAL":
-                    normals.append(data[:, :3])
+                    # gz-common normalizes each normal as it loads (ColladaLoader::LoadNormals)
+                    length = np.linalg.norm(data[:, :3], axis=1, keepdims=True)
+                    normals.append(np.divide(data[:, :3], length, out=np.zeros_like(data[:, :3]), where=length > 0))
                 elif name == "TEXCOORD":
                     uvs.append(data[:, :2])
     corners = np.concatenate(positions) if positions else np.zeros((0, 3))
@@ -333,7 +335,7 @@ def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path
     scene, world_counts, figures = [], {}, {}
     if world is not None:
         seen = probe_world(world, [models], meshes=False, physics_s=physics_s)
-        figures = {"world": {k: seen["world"][k] for k in ("parse_s", "peak_rss_mb")},
+        figures = {"world": {k: seen["world"][k] for k in ("parse_s", "parse_cpu_s", "peak_rss_mb") if k in seen["world"]},
                    "physics": seen.get("physics", {})}
         world_counts = {k: seen["world"][k] for k in ("models", "links", "visuals", "collisions")}
         scene += world_findings(world.name, seen["world"])
@@ -341,8 +343,20 @@ def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path
             for use in model["meshes"]:
                 if not use["path"]:
                     scene.append(finding("GZ009", f"{world.name}/{model['name']}", f"{use['uri']} does not resolve"))
+        scene += _scene_mesh_findings(world, seen)
         scene += physics_findings(world.name, seen.get("physics", {}))
     return BuildCheck(found, scene, world_counts, figures)
+
+
+def _scene_mesh_findings(world: Path, seen: dict) -> list[Finding]:
+    """The meshes the world names beside itself (its collision cells), as Gazebo's
+    loader reads them against what the files hold; the packages' meshes are checked
+    with their packages."""
+    folder = world.parent.resolve()
+    paths = sorted({Path(use["path"]).resolve() for model in seen.get("models", []) for use in model["meshes"]
+                    if use["path"] and Path(use["path"]).resolve().is_relative_to(folder)})
+    reports = {str(Path(k).resolve()): v for k, v in probe_meshes(paths).items()}
+    return mesh_findings(paths, reports, lambda path: f"{world.name}/{path.relative_to(folder)}")
 
 
 def _variant_level(name: str) -> int:

@@ -138,7 +138,7 @@ def test_resave_source_changes_bytes_not_content(tmp_path):
                 assert np.array_equal(va.mesh.vertices, vb.mesh.vertices) and np.array_equal(va.mesh.faces, vb.mesh.faces)
 
 
-def test_scale_rows_put_the_sample_and_the_large_plan_side_by_side():
+def test_scale_rows_put_the_sample_the_large_plan_and_the_stacked_one_side_by_side():
     from pipeline.bench.builds import _scale_side_rows
 
     def side(n, seconds, rss, parse_s, parse_mb, rtf):
@@ -146,15 +146,25 @@ def test_scale_rows_put_the_sample_and_the_large_plan_side_by_side():
                 "world": {"parse_s": parse_s, "peak_rss_mb": parse_mb}, "physics": {"real_time_factor": rtf},
                 "elements": {"visuals": 10, "collisions": 4}}
 
+    stacked = {"placements": 1787, "piled": 1000, "load_avg": [9.0, 3.0, 2.0],
+               "world": {"parse_s": 3.6, "parse_cpu_s": 1.3, "peak_rss_mb": 542.0},
+               "physics": {"real_time_factor": 6.25, "real_time_factor_cpu": 25.0},
+               "elements": {"visuals": 1573, "collisions": 67}}
     rows = _scale_side_rows({"sides": {"sample": side(787, 20.0, 1.0e9, 3.0, 900.0, 2.0),
-                                       "scale": side(5000, 70.0, 2.5e9, 12.0, 2091.0, 0.25)}})
+                                       "scale": side(5000, 70.0, 2.5e9, 12.0, 2091.0, 0.25), "stacked": stacked}})
     got = {t: (v, lim) for t, v, lim, _ in rows}
-    assert len(rows) == 10 and all("(load 3.5)" in t for t in got)
+    assert len(rows) == 13 and sum("(load 3.5)" in t for t in got) == 10
     assert got["787 placements (load 3.5): twin validate under 60 s"] == (20.0, 60.0)
     assert got["5,000 placements (load 3.5): Gazebo world parse under 1.5 GB"] == (2.091, 1.5)
     assert got["5,000 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (4.0, 1.0)
     assert got["787 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (0.5, 1.0)
     assert "10 visuals, 4 collisions" in next(t for t in got if t.startswith("5,000") and "parse under 10 s" in t)
+    # the stacked plan is probed, not validated; its CPU times beside the wall times
+    at = "1,787 placements, 1,000 at one point (load 9.0)"
+    assert not any(t.startswith(at) and "validate" in t for t in got)
+    assert got[f"{at}: Gazebo world parse under 10 s (1,573 visuals, 67 collisions; 1.3 s CPU)"] == (3.6, 10.0)
+    assert got[f"{at}: dartsim (bullet) at real time or faster (wall s per simulated s; 0.040 CPU s per simulated s)"] \
+        == (0.16, 1.0)
 
 
 def test_the_dataset_section_compares_the_label_pass_before_and_after(tmp_path, monkeypatch):

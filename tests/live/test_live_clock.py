@@ -140,7 +140,7 @@ def test_show_only_hides_exactly_the_other_placements(tmp_path):
                             800.0))
 
         def seen():  # what a render shows: its instance ids
-            ids, _ = scene.render_labels()
+            ids = scene.render_labels()[0]
             return set(np.unique(ids).tolist()) - {0}
 
         assert seen() == {1, 2}

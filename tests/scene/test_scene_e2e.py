@@ -15,7 +15,11 @@ from lxml import etree
 import mini_sources
 from poses import SAFE_XML, _acc, angle_diff, gltf_poses, independent_poses, sdf_poses, usd_poses
 from pipeline.builder.run import build
-from pipeline.validate import external
+from pipeline.export import names
+from pipeline.geometry.transform import xyz_rpy_to_matrix
+from pipeline.scene.world_collisions import read_collada_triangles
+from pipeline.validate import external, gazebo
+from collision_cells import assert_in_cells, cell_parts
 
 
 @pytest.fixture(scope="module", params=[(23.0, 6), (0.0, 6), (90.0, 4), (180.0, 6)],
@@ -188,14 +192,22 @@ def test_insert_scale_apply_reaches_every_output(scaled_build):
                 seen.add(tag)
     assert set(SCALED) <= seen
 
-    # SDF: a scaled placement is a model of its own; its whole-model visual and its
-    # collision meshes drawn at its scale, at its frame
+    # SDF: a scaled placement is a model of its own; its whole-model visual drawn at
+    # its scale, at its frame, and its collision meshes at its scale in the world's
+    # collision cells, as Gazebo places them
     world = etree.parse(str(out / "scene" / "mini.sdf"), SAFE_XML).getroot().find("world")
+    seen_sdf = gazebo.probe_world(out / "scene" / "mini.sdf", [out / "models"], meshes=False)
+    parts = cell_parts(seen_sdf)
+    rows = {p["tag"]: p for p in record["placements"]}
     for tag, s in SCALED.items():
         model = world.find(f"model[@name='{tag}']")
         assert model is not None and model.find(f"frame[@name='{tag}']") is not None
         items = model.findall("link/visual") + model.findall("link/collision")
-        assert sorted(i.get("name") for i in items) == sorted(f"{tag}{GROUPED_SEPARATOR}{k}" for k in ("whole", "collision"))
+        assert [i.get("name") for i in items] == [f"{tag}{GROUPED_SEPARATOR}whole"]
+        pose = [float(v) for v in model.find(f"frame[@name='{tag}']").findtext("pose").split()]
+        m = xyz_rpy_to_matrix(pose[:3], pose[3:])
+        vertices, _ = read_collada_triangles(out / "models" / rows[tag]["asset"] / names.WHOLE_COLLISION_FILE)
+        assert_in_cells(s * vertices @ m[:3, :3].T + m[:3, 3], parts, rows[tag]["lod"] == 0, tag)
         for item in items:
             assert item.find("pose").get("relative_to") == tag
             assert [float(v) for v in item.findtext("pose").split()] == [0.0] * 6

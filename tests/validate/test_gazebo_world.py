@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,11 @@ from pipeline.export import collada as collada_writer
 from pipeline.export import names
 from pipeline.export import sdf as sdf_writer
 from pipeline.export.variants import MAX_PRIMITIVES, kept_apart, variant_collisions, variant_visuals
+from pipeline.geometry.collision import connected_parts
 from pipeline.geometry.primitives import fit_primitive, signed_volume
+from pipeline.geometry.transform import xyz_rpy_to_matrix
+from pipeline.scene.world_collisions import MODEL_NAME as CELLS_MODEL, read_collada_triangles
+from collision_cells import assert_in_cells, cell_parts
 from pipeline.validate import gazebo
 
 SAFE = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
@@ -155,6 +160,15 @@ def site(request):
     return out, world, gazebo.probe_world(world, [out / "models"], physics_s=0.2)
 
 
+def _grouped(root) -> list:
+    """The world's models of grouped placements (a frame each)."""
+    return [m for m in root.findall("world/model") if m.find("frame") is not None]
+
+
+def _whole_collision(out: Path, asset: str) -> tuple[np.ndarray, np.ndarray]:
+    return read_collada_triangles(out / "models" / asset / names.WHOLE_COLLISION_FILE)
+
+
 def test_gazebo_loads_the_world_with_every_placement(site):
     out, world, seen = site
     assert seen["world"]["errors"] == []
@@ -163,8 +177,9 @@ def test_gazebo_loads_the_world_with_every_placement(site):
     included = {i.findtext("name") for i in root.iter("include")} - {"terrain"}
     framed = {f.get("name") for f in root.findall("world/model/frame")}
     assert included | framed == tags and not included & framed
-    # every visual of a grouped placement hangs on its frame
-    for model in root.findall("world/model"):
+    # every visual of a grouped placement hangs on its frame; their collisions are the
+    # world's cells'
+    for model in _grouped(root):
         for el in model.iter("visual", "collision"):
             tag = el.find("pose").get("relative_to")
             assert tag in framed and el.get("name").startswith(tag + "__")
@@ -198,7 +213,7 @@ def test_a_grouped_placement_is_where_its_include_would_be(site, tmp_path):
     it) shows with all its visuals: the same vertices, each where Gazebo puts it."""
     out, world, seen = site
     root = etree.parse(str(world), SAFE).getroot()
-    for model in root.findall("world/model"):
+    for model in _grouped(root):
         frame = model.find("frame")
         tag, pose = frame.get("name"), [float(v) for v in frame.findtext("pose").split()]
         alone = tmp_path / "alone.sdf"  # beside the shared build, not in it
@@ -230,22 +245,73 @@ def test_a_grouped_placement_is_where_its_include_would_be(site, tmp_path):
         # one visual and one collision a placement
         assert len([v for v in model.iter("visual") if v.find("pose").get("relative_to") == tag]) == 1
         assert len([c for c in model.iter("collision") if c.find("pose").get("relative_to") == tag]) <= 1
-    assert any(m.find("link/visual").get("name").endswith("__whole") for m in root.findall("world/model"))
+    assert any(m.find("link/visual").get("name").endswith("__whole") for m in _grouped(root))
+
+
+def collides_where_placed(root, seen: dict, out: Path, placements: dict[str, dict]) -> int:
+    """Assert that every grouped placement's collision is in the world's collision
+    cells where its own would be: each vertex of its package's collision meshes,
+    posed by its frame, is a vertex of a cell's mesh (near, LOD 0: every triangle) or
+    inside one of the cell's boxes (far). Returns the placements checked."""
+    parts = cell_parts(seen)
+    checked = 0
+    for model in _grouped(root):
+        drawn = {el.find("pose").get("relative_to") for el in model.iter("visual")}
+        for frame in model.findall("frame"):
+            tag = frame.get("name")
+            if tag not in drawn:
+                continue  # it repeats a placement drawn before, whose collision stands for both
+            row = placements[tag]
+            pose = [float(v) for v in frame.findtext("pose").split()]
+            m = xyz_rpy_to_matrix(pose[:3], pose[3:])
+            vertices, _ = _whole_collision(out, row["asset"])
+            assert_in_cells(vertices @ m[:3, :3].T + m[:3, 3], parts, row["lod"] == 0, tag)
+            checked += 1
+    return checked
+
+
+def test_grouped_placements_collide_in_the_cells_where_they_stand(site):
+    out, world, seen = site
+    root = etree.parse(str(world), SAFE).getroot()
+    assert all(c.findtext("geometry/mesh/uri").startswith("collision/") for c in root.iter("collision")
+               if c.getparent().getparent().get("name") == CELLS_MODEL)
+    placements = {p["tag"]: p for p in json.loads((out / "scene" / "placements.json").read_text())["placements"]}
+    assert collides_where_placed(root, seen, out, placements) == len(placements)
+
+
+def test_validation_reads_the_collision_cells_as_gazebo_does(site, tmp_path):
+    """check_build loads the meshes the world names beside itself and compares them
+    with the files: none on the built world, a finding naming the cell when one is
+    cut short."""
+    out, world, _ = site
+    shutil.copytree(out / "scene", tmp_path / "scene")
+    copy = tmp_path / "scene" / world.name
+    clean = gazebo.check_build(out / "models", copy, {}, tmp_path, physics_s=0.0)
+    assert clean.scene == []
+    cell = sorted((tmp_path / "scene" / "collision").glob("*.dae"))[0]
+    cell.write_bytes(cell.read_bytes()[: len(cell.read_bytes()) // 2])
+    found = gazebo.check_build(out / "models", copy, {}, tmp_path, physics_s=0.0).scene
+    assert found and {f.site for f in found} == {f"{world.name}/collision/{cell.name}"}
+    assert {f.code for f in found} <= {"GZ001", "GZ010"}
 
 
 def test_dartsim_builds_and_steps_the_world(site):
     _, _, seen = site
     physics = seen["physics"]
     assert physics["ok"] and physics["failed_shapes"] == 0 and physics["collision_detector"] == "bullet"
-    assert physics["mesh_shapes"] + physics["primitive_shapes"] > 0 and physics["steps"] == 200
+    assert physics["mesh_shapes"] + physics["primitive_shapes"] == seen["world"]["collisions"] > 0
+    assert physics["steps"] == 200
 
 
-def test_devices_piled_on_one_point_collide_once(site):
+def test_devices_piled_on_one_point_are_drawn_and_collide_once(site, tmp_path):
     """Placements of one asset at one pose (real drawings pile blocks on one insertion
-    point) are each drawn, but their collision is in the world once: dartsim would
-    test every copy against every other at each step. Near (LOD 0: each visual and
-    collision as in the package) and far (the whole model)."""
+    point) each keep their frame (name and pose), but one visual and one collision
+    stand for them all: a renderer would draw the same triangles in the same place and
+    dartsim test every copy against every other at each step. Near (LOD 0: each visual
+    and collision as in the package) and far (the whole model, its collision in the
+    world's cells)."""
     from pipeline.scene.placements import Placed, yaw_matrix
+    from pipeline.scene.world_collisions import CollisionCells
     from pipeline.scene.world_sdf import grouped_model
 
     out, _, _ = site
@@ -253,14 +319,116 @@ def test_devices_piled_on_one_point_collide_once(site):
             for i in range(5)]
     apart = Placed(ir.Placement("K-9", "kiosk", "L1", 9.0, 0.0), yaw_matrix(0.5, (12.0, 4.0, 1.0)), 0.5)
     turned = Placed(ir.Placement("K-8", "kiosk", "L1", 0.0, 0.0), yaw_matrix(0.7, (3.0, 4.0, 1.0)), 0.7)
-    seen: set = set()
-    model = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", [*spot, apart, turned], collisions=seen)
-    assert len(model.findall("link/visual")) == 7
-    assert sorted(c.find("pose").get("relative_to") for c in model.findall("link/collision")) == ["K-0", "K-8", "K-9"]
-    again = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", spot[:1], name="K-0b", collisions=seen)
-    assert again.findall("link/collision") == []  # shared by every model of one world
-    # the same at a coarse level, where each placement draws the whole model
+    drawn: set = set()
+    model = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", [*spot, apart, turned], drawn=drawn)
+    assert [f.get("name") for f in model.findall("frame")] == ["K-0", "K-1", "K-2", "K-3", "K-4", "K-9", "K-8"]
+    for kind in ("visual", "collision"):
+        posed = sorted({el.find("pose").get("relative_to") for el in model.findall(f"link/{kind}")})
+        assert posed == ["K-0", "K-8", "K-9"], kind
+    again = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", spot[:1], name="K-0b", drawn=drawn)
+    assert again.findall("link/visual") == again.findall("link/collision") == []  # shared by every model of one world
+    # the same at a coarse level, where each placement draws the whole model and
+    # collides in its cell
     far = [Placed(p.placement, p.pose, p.yaw, lod=1) for p in (*spot, apart)]
-    model = grouped_model("kiosk__lod1", out / "models" / "kiosk__lod1" / "model.sdf", far, collisions=set())
-    assert [v.get("name") for v in model.findall("link/visual")] == [f"{p.placement.tag}__whole" for p in far]
-    assert [c.get("name") for c in model.findall("link/collision")] == ["K-0__collision", "K-9__collision"]
+    cells, drawn = CollisionCells(out / "models"), set()
+    model = grouped_model("kiosk__lod1", out / "models" / "kiosk__lod1" / "model.sdf", far, cells=cells, drawn=drawn)
+    assert [v.get("name") for v in model.findall("link/visual")] == ["K-0__whole", "K-9__whole"]
+    assert model.findall("link/collision") == []
+    # near ones in the cells too: every triangle of their collision meshes
+    model = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", [*spot, turned], cells=cells, drawn=drawn)
+    assert model.findall("link/collision") == [] and len(model.findall("frame")) == 6
+    merged = cells.write(tmp_path)
+    (cell,) = merged.findall("link/collision")  # all within one cell
+    seen = next(iter(gazebo.probe_meshes([tmp_path / cell.findtext("geometry/mesh/uri")]).values()))
+    vertices, faces = _whole_collision(out, "kiosk")
+    boxes = 12 * len(connected_parts(faces, len(vertices)))
+    # far K-0 once for the five, far K-9; near K-0 once for the five, near K-8
+    assert seen["ok"] and seen["triangles"] == 2 * boxes + 2 * len(faces)
+
+
+# --- a generated site of many bays ------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def bays(request, tmp_path_factory):
+    """The mini sources' layout repeated over many bays by bench.plans.at_scale (300
+    placements, 40 of them piled on the first INSERT's point, as real drawings pile
+    blocks), built beside a copy of the mini build (its packages come from the cache),
+    as Gazebo loads it."""
+    from helpers import twin
+    from pipeline.bench import plans
+
+    if not gazebo.available() and not os.environ.get("CI"):
+        pytest.skip(gazebo.PROBE_HINT)
+    src, out = request.getfixturevalue("mini_build")
+    folder = tmp_path_factory.mktemp("bays")
+    shutil.copytree(src, folder / "src")
+    shutil.copytree(out, folder / "build", symlinks=True)
+    plan = plans.at_scale(folder / "src", folder / "bays", 300, 40)
+    done = twin("build", "--sources", plan, "--out", folder / "build", "--json", timeout=1200)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = folder / "build"
+    world = out / "scene" / "mini.sdf"
+    return out, world, gazebo.probe_world(world, [out / "models"], physics_s=0.2)
+
+
+def test_many_bays_parse_and_every_placement_is_named_where_it_stands(bays):
+    out, world, seen = bays
+    assert seen["world"]["errors"] == []
+    placements = {p["tag"]: p for p in json.loads((out / "scene" / "placements.json").read_text())["placements"]}
+    root = etree.parse(str(world), SAFE).getroot()
+    frames = {f.get("name"): f for m in _grouped(root) for f in m.findall("frame")}
+    assert len(placements) == 300 and set(frames) == set(placements)
+    for tag, frame in frames.items():
+        pose = [float(v) for v in frame.findtext("pose").split()]
+        np.testing.assert_allclose(pose[:3], placements[tag]["enu"], atol=2e-6)
+        assert pose[5] == pytest.approx(placements[tag]["yaw_rad"], abs=2e-9)
+    # the piled copies are frames alone: one visual draws each distinct placement
+    piled = [t for t in placements if "-P" in t]
+    drawn = {v.find("pose").get("relative_to") for m in _grouped(root) for v in m.iter("visual")}
+    assert len(piled) == 40 and len(set(piled) - drawn) >= 40 - 6  # six INSERTs piled in turn
+    assert len(drawn) == len(placements) - len(set(piled) - drawn)
+
+
+def test_many_bays_collide_in_a_few_shapes_where_they_stand(bays):
+    """Every drawn placement's collision is in its cell, and only there (the world's
+    other collisions are the terrain's); dartsim builds every shape and steps the
+    world."""
+    out, world, seen = bays
+    root = etree.parse(str(world), SAFE).getroot()
+    placements = {p["tag"]: p for p in json.loads((out / "scene" / "placements.json").read_text())["placements"]}
+    drawn = {v.find("pose").get("relative_to") for m in _grouped(root) for v in m.iter("visual")}
+    assert collides_where_placed(root, seen, out, placements) == len(drawn)
+    physics = seen["physics"]
+    assert physics["ok"] and physics["failed_shapes"] == 0 and physics["steps"] == 200
+    shapes = physics["mesh_shapes"] + physics["primitive_shapes"]
+    assert shapes == seen["world"]["collisions"]
+    per_model = {m["name"]: sum(u["kind"] == "collision" for u in m["meshes"]) + m["primitive_collisions"]
+                 for m in seen["models"]}
+    assert {name for name, n in per_model.items() if n} == {"terrain", CELLS_MODEL}
+    assert 1 < per_model[CELLS_MODEL] <= len(drawn) / 4
+
+
+def test_many_bays_keep_stateful_placements_addressable(bays, tmp_path):
+    """Placements of an asset the runtime drives (own_model: bound ones) stay models of
+    their own, named by their tags, among hundreds of grouped ones; their collisions
+    stay theirs."""
+    from pipeline.scene import world_sdf
+    from pipeline.scene.placements import Placed, yaw_matrix
+
+    out, _, _ = bays
+    record = json.loads((out / "scene" / "placements.json").read_text())
+    placed = [Placed(ir.Placement(p["tag"], p["asset"], p["level"], 0.0, 0.0), yaw_matrix(p["yaw_rad"], p["enu"]),
+                     p["yaw_rad"], p["lod"]) for p in record["placements"]]
+    world = tmp_path / "scene" / "own.sdf"
+    world.parent.mkdir()
+    world_sdf.write(world, site_name="own", origin_llh=(-12.7, -38.3, 48.0), placed=placed,
+                    terrain_model=record["terrain"], sun={"intensity": 1.0, "elevation_deg": 40, "azimuth_deg": 30},
+                    models=out / "models", own_model=frozenset({"pole"}))
+    seen = gazebo.probe_world(world, [out / "models"], meshes=False, physics_s=0.05)
+    assert seen["world"]["errors"] == []
+    poles = {p.placement.tag for p in placed if p.placement.asset_id == "pole"}
+    models = {m["name"]: m for m in seen["models"]}
+    assert poles and poles <= set(models)
+    for tag in poles:
+        assert any(u["kind"] == "collision" for u in models[tag]["meshes"]) or models[tag]["primitive_collisions"]
+    assert seen["physics"]["ok"] and seen["physics"]["failed_shapes"] == 0

@@ -22,6 +22,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -126,6 +127,15 @@ double CurrentRssMb()
 double Seconds(std::chrono::steady_clock::time_point since)
 {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+// CPU seconds this process has spent: on a shared machine, what a figure costs apart
+// from the wait for a core.
+double CpuSeconds()
+{
+  struct timespec t;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec + t.tv_nsec * 1e-9;
 }
 
 // ---------------------------------------------------------------- meshes
@@ -283,12 +293,20 @@ std::map<std::string, std::string> LoadMeshes(const std::vector<std::string> &pa
 
 // ---------------------------------------------------------------- world
 
-// model://name/rest -> the file under the first SDF_PATH folder that holds it.
-std::string ResolveUri(const std::string &uri, const std::string &fallback)
+// model://name/rest -> the file under the first SDF_PATH folder that holds it; a
+// relative path -> beside the SDF file that names it (sdfFile), as gz-sim's asFullPath
+// resolves a mesh URI.
+std::string ResolveUri(const std::string &uri, const std::string &sdfFile)
 {
   const std::string scheme = "model://";
   if (uri.rfind(scheme, 0) != 0)
-    return uri.rfind("file://", 0) == 0 ? uri.substr(7) : (fallback.empty() ? uri : fallback);
+  {
+    if (uri.rfind("file://", 0) == 0) return uri.substr(7);
+    if (uri.find("://") != std::string::npos || uri.empty() || uri[0] == '/') return uri;
+    const auto slash = sdfFile.rfind('/');
+    const std::string candidate = (slash == std::string::npos ? "" : sdfFile.substr(0, slash + 1)) + uri;
+    return access(candidate.c_str(), R_OK) == 0 ? candidate : "";
+  }
   const std::string rest = uri.substr(scheme.size());
   const char *env = std::getenv("SDF_PATH");
   std::stringstream folders(env ? env : "");
@@ -495,17 +513,20 @@ std::string Physics(const sdf::World &world, double seconds)
   input.Get<std::chrono::steady_clock::duration>() = step;
   const int steps = static_cast<int>(std::lround(seconds / 0.001));
   const auto stepStart = std::chrono::steady_clock::now();
+  const double stepCpuStart = CpuSeconds();
   for (int i = 0; i < steps; ++i)
     physicsWorld->Step(output, state, input);
   const double wall = Seconds(stepStart);
+  const double cpu = CpuSeconds() - stepCpuStart;
   const double simulated = steps * 0.001;
   std::ostringstream out;
   out << "{\"ok\":true,\"engine\":\"dartsim\",\"collision_detector\":"
       << Quote(physicsWorld->GetCollisionDetector()) << ",\"build_s\":" << Num(buildSeconds)
       << ",\"mesh_shapes\":" << meshShapes << ",\"primitive_shapes\":" << primitiveShapes
       << ",\"failed_shapes\":" << failed << ",\"steps\":" << steps << ",\"step_s\":0.001"
-      << ",\"wall_s\":" << Num(wall)
-      << ",\"real_time_factor\":" << Num(wall > 0 ? simulated / wall : 0.0) << "}";
+      << ",\"wall_s\":" << Num(wall) << ",\"cpu_s\":" << Num(cpu)
+      << ",\"real_time_factor\":" << Num(wall > 0 ? simulated / wall : 0.0)
+      << ",\"real_time_factor_cpu\":" << Num(cpu > 0 ? simulated / cpu : 0.0) << "}";
   return out.str();
 }
 
@@ -549,9 +570,11 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
 {
   const double rssBefore = CurrentRssMb();
   const auto start = std::chrono::steady_clock::now();
+  const double cpuStart = CpuSeconds();
   sdf::Root root;
   const sdf::Errors errors = root.Load(file);
   const double parseSeconds = Seconds(start);
+  const double parseCpu = CpuSeconds() - cpuStart;
   const double peakRss = PeakRssMb();
   const double rssAfter = CurrentRssMb();
 
@@ -563,6 +586,7 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
 
   std::ostringstream out;
   out << "{\"world\":{\"file\":" << Quote(file) << ",\"parse_s\":" << Num(parseSeconds)
+      << ",\"parse_cpu_s\":" << Num(parseCpu)
       << ",\"peak_rss_mb\":" << Num(peakRss) << ",\"rss_before_mb\":" << Num(rssBefore)
       << ",\"rss_after_mb\":" << Num(rssAfter) << ",\"errors\":" << errorList;
   if (!world)
