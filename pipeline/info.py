@@ -110,7 +110,8 @@ def gather(sources: Path, build: Path = Path("build"), progress=None) -> InfoRep
 
 def _conductors(r: InfoReport, site, fp, assets: dict) -> None:
     """The conductors' sources: counts, and every [[conductors]] end whose tag or
-    terminal does not exist (the plan's lines are snapped when the scene is built)."""
+    terminal does not exist (the plan's lines are snapped when the scene is built; a
+    .blend's own terminals are known once it is read, at build time)."""
     from .wiring import load_wiring
 
     try:
@@ -127,7 +128,9 @@ def _conductors(r: InfoReport, site, fp, assets: dict) -> None:
         for tag, name in (spec.start, spec.end):
             if tag not in asset_of:
                 r.problems.append(f"{site.path}: conductors: conductor {spec.id}: no placement is tagged {tag!r}")
-            elif asset_of[tag] in assets and name not in {n for n, _ in assets[asset_of[tag]].terminals}:
+            elif asset_of[tag] in assets and name not in {n for n, _ in assets[asset_of[tag]].terminals} \
+                    and assets[asset_of[tag]].source.suffix.lower() != ".blend":
+                # a .blend's terminals are its `terminal.<name>` empties, read when it is built
                 r.problems.append(f"{site.path}: conductors: conductor {spec.id}: {tag} ({asset_of[tag]}) has no "
                                   f"terminal {name!r}")
 

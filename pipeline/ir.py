@@ -378,10 +378,14 @@ class Asset:
     description: str = ""
     source: str = ""
     metadata: tuple[tuple[str, str], ...] = ()
+    # conductor attachment points the source declares (a .blend's `terminal.<name>`
+    # empties): (name, (x, y, z) model-frame metres), sorted by name
+    terminals: tuple[tuple[str, tuple[float, float, float]], ...] = ()
 
     def __post_init__(self):
         for name in ("links", "joints", "materials", "bindings", "lods", "metadata"):
             object.__setattr__(self, name, tuple(getattr(self, name)))
+        object.__setattr__(self, "terminals", tuple((str(n), tuple(float(v) for v in p)) for n, p in self.terminals))
 
     def material(self, name: str) -> Material:
         for m in self.materials:

@@ -32,6 +32,7 @@ class ConductorType:
     bundle_spacing_m: float = 0.0
     max_temperature_c: float = 75.0
     description: str = ""
+    resistance_ohm_per_km: tuple[float, float] | None = None  # AC at 25 and 75 deg C, one subconductor
 
     @property
     def w(self) -> float:
@@ -84,6 +85,7 @@ class Wiring:
     collision: str
     layers: dict  # upper-case layer name -> its settings
     specs: tuple[SpanSpec, ...]
+    sag_variants_c: tuple[float, ...] = ()  # conductor temperatures of the SDF world's sag variants
 
     @property
     def empty(self) -> bool:
@@ -117,8 +119,12 @@ def load_types(path: Path, passed: config.PassedChecks | None = None) -> dict[st
                             f"a bundle of {count} needs a spacing above the diameter ({t['diameter_m']} m)")
         out[name] = ConductorType(name, float(t["diameter_m"]), float(t["mass_kg_per_m"]), float(t["ea_n"]),
                                   float(t["alpha_per_k"]), count, spacing, float(t.get("max_temperature_c", 75.0)),
-                                  t.get("description", ""))
+                                  t.get("description", ""), _resistance(t))
     return out
+
+
+def _resistance(t: dict) -> tuple[float, float] | None:
+    return (float(t["r25_ohm_per_km"]), float(t["r75_ohm_per_km"])) if "r25_ohm_per_km" in t else None
 
 
 def load_wiring(site: config.Site) -> Wiring:
@@ -164,7 +170,8 @@ def load_wiring(site: config.Site) -> Wiring:
     if problems:
         raise UserError(site.path, "conductors", _listing(problems))
     return Wiring(types_path, types, float(options["temperature_c"]), float(options["snap_tolerance_m"]),
-                  tuple(budgets), options["collision"], layers, tuple(specs))
+                  tuple(budgets), options["collision"], layers, tuple(specs),
+                  tuple(float(t) for t in options.get("sag_variants_c", ())))
 
 
 def _listing(problems: list[str]) -> str:

@@ -92,11 +92,19 @@ def loads(data: bytes) -> tuple[ir.Asset, dict]:
     return asset, header["extra"]
 
 
+# Fields added after files were written: left out while empty, so an asset without
+# them keeps its file's bytes (and the tasks downstream their cache entries).
+_LATER = {("Asset", "terminals")}
+
+
 def _encode(x, arrays: list):
     if dataclasses.is_dataclass(x):
         out = {"$": type(x).__name__}
         for f in dataclasses.fields(x):
-            out[f.name] = _encode(getattr(x, f.name), arrays)
+            value = getattr(x, f.name)
+            if (type(x).__name__, f.name) in _LATER and not value:
+                continue
+            out[f.name] = _encode(value, arrays)
         return out
     if isinstance(x, np.ndarray):
         arrays.append(x)

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from .. import config, ir
+from ..errors import UserError
 from ..digest import sha256_file
 from .layout import ir_path
 
@@ -27,6 +28,19 @@ def with_metadata(asset: ir.Asset, cfg: config.AssetConfig) -> ir.Asset:
     if total > 0:
         links = tuple(dataclasses.replace(link, mass=cfg.mass_kg * link.mass / total) for link in links)
     return asset.with_(description=cfg.description, category=cfg.category, links=links)
+
+
+def terminals(cfg: config.AssetConfig, asset: ir.Asset) -> list[dict]:
+    """The manifest's terminals: asset.toml's [[terminals]] as written, then the
+    source's (a .blend's `terminal.<name>` empties, to the micrometre: Blender keeps
+    single precision). A name given by both is an error naming both places."""
+    written = {n: xyz for n, xyz in cfg.terminals}
+    clashes = [f"terminal {n!r} is in asset.toml [[terminals]] at {list(written[n])} and in {Path(cfg.source).name} "
+               f"(Empty terminal.{n} at {[round(v, 6) for v in xyz]})" for n, xyz in asset.terminals if n in written]
+    if clashes:
+        raise UserError(cfg.path, "terminals", "; ".join(clashes) + ": keep one of each")
+    return [{"name": n, "position": list(xyz)} for n, xyz in cfg.terminals] + \
+        [{"name": n, "position": [round(v, 6) + 0.0 for v in xyz]} for n, xyz in asset.terminals]
 
 
 def build_asset(staging: Path, asset_toml: str, build: str, memo: str | None = None,
@@ -58,7 +72,7 @@ def build_asset(staging: Path, asset_toml: str, build: str, memo: str | None = N
     source = {"file": cfg.source.name, "sha256": sha256_file(cfg.source), "config_sha256": sha256_file(cfg.path)}
     data = manifest.content(asset, source=source, outputs=outputs, lod_models=lod_models)
     # conductor attachment points, model frame: what the scene strings its spans between
-    data["terminals"] = [{"name": n, "position": list(xyz)} for n, xyz in cfg.terminals]
+    data["terminals"] = terminals(cfg, asset)
     data["findings"] = {"source": as_dicts(source_findings), "built": as_dicts(built_findings)}
     manifest.write(data, models / asset.id)
     return {"asset": asset.id, "triangles": [lod["triangles"] for lod in data["lods"]],

@@ -133,4 +133,5 @@ def transform_asset(asset: ir.Asset, frame: Frame) -> ir.Asset:
         ))
     bindings = tuple(replace(b, range=(b.range[0] * f, b.range[1] * f)) if b.effect == "translate" else b
                      for b in asset.bindings)
-    return asset.with_(links=links, joints=tuple(joints), bindings=bindings)
+    terminals = tuple((n, tuple(float(v) for v in rot @ np.asarray(p) * f)) for n, p in asset.terminals)
+    return asset.with_(links=links, joints=tuple(joints), bindings=bindings, terminals=terminals)

@@ -24,6 +24,7 @@ from .outside import GazeboOut, SignalsIn
 from .render_worker import RenderJob, RenderWorker
 from .server import LiveServer
 from .twin import LiveTwin
+from .wires import load_record
 
 DEFAULT_SIZE = (640, 480)
 
@@ -66,7 +67,7 @@ def make_server(build: Path, sources: Path, scenario: Path | None = None, *, spe
             sc.start = when.astimezone(dt.timezone.utc)
     else:
         now = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
-        sc = default_scenario(site, when or now, step_s=step_s)
+        sc = default_scenario(site, when or now, step_s=step_s, wires=load_record(build))
     cam, presets, _ = sensor_of(sensor)
     try:
         twin = LiveTwin(sc, site, LiveCamera(site, presets))

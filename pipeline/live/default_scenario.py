@@ -1,7 +1,8 @@
 """The scenario `twin serve` runs without one: the clock, the sun over the site (its
 turbidity and the sky's aerosol settable), the camera's zoom, every bound state of the
-built scene (render.<STATE>.<variable>, held at its domain's top: full gauges) and every
-switch (switch_<TAG>, closed) as settable inputs."""
+built scene (render.<STATE>.<variable>, held at its domain's top: full gauges), every
+switch (switch_<TAG>, closed) and, with conductors built, each conductor type's load
+current and the air's temperature (live.wires) as settable inputs."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from pathlib import Path
 from .. import sun as sun_model
 from ..runtime import graph
 from ..runtime.site import BuiltSite
+from .wires import scenario_part
 
 DEFAULT_AEROSOL = 1.0  # Blender's sky default: the dataset samples around it
 
@@ -31,7 +33,9 @@ def switchgear(site: BuiltSite) -> list[str]:
     return sorted(out)
 
 
-def default_scenario(site: BuiltSite, start: dt.datetime, step_s: float = 1.0, seed: int = 0) -> graph.Scenario:
+def default_scenario(site: BuiltSite, start: dt.datetime, step_s: float = 1.0, seed: int = 0,
+                     wires: dict | None = None) -> graph.Scenario:
+    """`wires`: the build's conductors.json (live.wires.load_record), or None."""
     lat, lon = site.origin[0], site.origin[1]
     nodes = [
         {"id": "clock", "type": "clock", "period_s": step_s},
@@ -45,6 +49,10 @@ def default_scenario(site: BuiltSite, start: dt.datetime, step_s: float = 1.0, s
     nodes += [{"id": switch_node(t), "type": "constant", "params": {"value": False, "type": "bool", "unit": "1"}}
               for t in switchgear(site)]
     edges = [{"from": "tau_atm.value", "to": "sun.tau_atm", "type": "float", "unit": "1"}]
+    if wires is not None:
+        more_nodes, more_edges = scenario_part(wires, "sun", "render", site.origin[2])
+        nodes += more_nodes
+        edges += more_edges
     return graph.Scenario(path=Path(site.build) / "scene" / "placements.json", name="live", seed=seed,
                           duration_s=0.0, step_s=step_s, start=start.astimezone(dt.timezone.utc), assets=[],
                           nodes=nodes, edges=edges, description="the built scene's states, settable", zone=site.zone)

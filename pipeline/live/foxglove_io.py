@@ -5,6 +5,8 @@ WebSocket protocol (foxglove-sdk), both with Foxglove's message schemas in JSON 
                    part (a bound visual) in its placement's, and the camera
     /twin/state    the published message (seq, sim_time, wall_time, values), schemas/live
     /camera/image  foxglove.CompressedImage: each rendered frame, PNG
+    /conductors    foxglove.SceneUpdate: a line strip per span (its bundle centre, ENU),
+                   sent when a conductor group's temperature changes its sag
 
 Message times are simulated time (ns since the Unix epoch): a recording plays back on
 the twin's clock."""
@@ -41,8 +43,25 @@ SCHEMAS = {
         "timestamp": _TIME, "frame_id": {"type": "string"},
         "data": {"type": "string", "contentEncoding": "base64"}, "format": {"type": "string"}}},
 }
+_COLOR = {"type": "object", "properties": {n: {"type": "number"} for n in "rgba"}}
+_POSE = {"type": "object", "properties": {"position": _xyz("xyz"), "orientation": _xyz("xyzw")}}
+LINE_STRIP = 0  # foxglove.LineType
+SCHEMAS["foxglove.SceneUpdate"] = {"title": "foxglove.SceneUpdate", "type": "object", "properties": {
+    "deletions": {"type": "array", "items": {"type": "object"}},
+    "entities": {"type": "array", "items": {"type": "object", "properties": {
+        "timestamp": _TIME, "frame_id": {"type": "string"}, "id": {"type": "string"},
+        "lifetime": _TIME, "frame_locked": {"type": "boolean"},
+        "metadata": {"type": "array", "items": {"type": "object", "properties": {
+            "key": {"type": "string"}, "value": {"type": "string"}}}},
+        "lines": {"type": "array", "items": {"type": "object", "properties": {
+            "type": {"type": "integer"}, "pose": _POSE, "thickness": {"type": "number"},
+            "scale_invisible": {"type": "boolean"}, "points": {"type": "array", "items": _xyz("xyz")},
+            "color": _COLOR, "colors": {"type": "array", "items": _COLOR},
+            "indices": {"type": "array", "items": {"type": "integer"}}}}}}}}}}
 TOPICS = {"/tf": "foxglove.FrameTransforms", "/twin/state": "substation_twin.State",
-          "/camera/image": "foxglove.CompressedImage"}
+          "/camera/image": "foxglove.CompressedImage", "/conductors": "foxglove.SceneUpdate"}
+WIRE_PX = 2.0  # a 30 mm conductor is under a pixel from most views: the line is drawn in pixels
+WIRE_COLOUR = {"r": 0.85, "g": 0.55, "b": 0.2, "a": 1.0}
 
 
 def state_schema() -> dict:
@@ -91,6 +110,26 @@ def frame_transforms(site, visual_states, t_ns: int, camera_pose=None, placement
     if camera_pose is not None:
         out.append(transform(WORLD, "camera", camera_pose, t_ns))
     return {"transforms": out}
+
+
+def conductor_scene(wires, temperatures: dict, t_ns: int) -> dict:
+    """foxglove.SceneUpdate: an entity per span (id: the span id) with its line strip at
+    its group's temperature (`temperatures`: type -> degC or None) and its sag."""
+    entities = []
+    for name, spans in sorted(wires.groups.items()):
+        temp, sags = temperatures[name], wires.sags(name, temperatures[name])
+        for s in spans:
+            pts = wires.polyline(s, temp)
+            entities.append({
+                "timestamp": stamp(t_ns), "frame_id": WORLD, "id": s["id"], "lifetime": stamp(0), "frame_locked": False,
+                "metadata": [{"key": "type", "value": name}, {"key": "sag_m", "value": f"{sags[s['id']]:.6f}"},
+                             {"key": "temperature_c", "value": "as built" if temp is None else f"{temp:.3f}"}],
+                "lines": [{"type": LINE_STRIP, "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                                        "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+                           "thickness": WIRE_PX, "scale_invisible": True,
+                           "points": [{"x": float(x), "y": float(y), "z": float(z)} for x, y, z in pts],
+                           "color": WIRE_COLOUR, "colors": [], "indices": []}]})
+    return {"deletions": [], "entities": entities}
 
 
 class McapLog:
@@ -151,6 +190,7 @@ class Recorder:
         self.twin, self.sinks = twin, sinks
         self._placed = False
         self._last = None
+        self._wires_last = None
 
     def state(self, twin, msg: dict) -> None:
         t_ns = ns(dt.datetime.fromisoformat(msg["sim_time"]))
@@ -165,6 +205,13 @@ class Recorder:
             self._placed = True
             for s in self.sinks:
                 s.log("/tf", tf, t_ns)
+        if twin.wires is not None:
+            temperatures = twin.wires.temperatures(values)
+            if temperatures != self._wires_last:  # the lines only when a sag changed
+                self._wires_last = temperatures
+                scene = conductor_scene(twin.wires, temperatures, t_ns)
+                for s in self.sinks:
+                    s.log("/conductors", scene, t_ns)
 
     def image(self, plan, png: bytes) -> None:
         t_ns = ns(plan.shot.when)

@@ -95,6 +95,10 @@ class GazeboOut:
         self._sun(twin)
         self._switches(twin)
         self._materials_and_visuals(twin)
+        if twin.wires is not None:
+            # the world's conductors are one static model of merged meshes (per sag variant):
+            # gz-sim has no request that reshapes a static visual or swaps a model's meshes
+            self.not_applied.add("conductors (sag: a static model; the world's SDF carries the sag variants)")
 
     def _sun(self, twin) -> None:
         e, az, irr, _ = twin.sun()

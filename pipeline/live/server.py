@@ -105,6 +105,9 @@ class LiveServer:
     def _publish(self, k: int, values: dict) -> None:
         self.seq += 1
         msg = protocol.published(self.seq, k, self.twin.instant(k), values)
+        wires = self.twin.conductor_changes()
+        if wires:
+            msg["conductors"] = wires
         if self.inputs is not None:
             msg["stale"] = sorted(self.inputs.stale)
         self.zmq.publish(protocol.encode(msg))
@@ -181,6 +184,8 @@ class LiveServer:
     def _cmd_get(self, req) -> dict:
         reply = {"ok": True, "seq": self.seq, "sim_time": self.twin.instant().isoformat(),
                  "values": self.twin.get(req.get("ports"))}
+        if req.get("conductors") and self.twin.wires is not None:
+            reply["conductors"] = self.twin.conductors()
         if self.inputs is not None:
             reply["stale"] = sorted(self.inputs.stale)
         return reply
@@ -260,7 +265,10 @@ class LiveServer:
 
     def snapshot(self) -> dict:
         """Every port's value as a published message (a late subscriber's start)."""
-        return protocol.published(max(self.seq, 0), self.twin.engine.k, self.twin.instant(), self.twin.get())
+        msg = protocol.published(max(self.seq, 0), self.twin.engine.k, self.twin.instant(), self.twin.get())
+        if self.twin.wires is not None:
+            msg["conductors"] = self.twin.conductors()
+        return msg
 
     def hello(self) -> dict:
         t = self.twin

@@ -17,6 +17,7 @@ from ..runtime.site import BuiltSite, Shot
 from .camera import LiveCamera
 from .default_scenario import DEFAULT_AEROSOL, switch_node, switchgear
 from .ports import PortSpec, check_value, port_table
+from .wires import LiveWires, load_record
 
 MAX_CATCH_UP = 1000  # steps run one by one when the clock is ahead; further, the graph jumps
 
@@ -45,6 +46,8 @@ class LiveTwin:
         self.camera_id = next((n for n in self.graph.order if self.graph.nodes[n].type_name == "camera"), None)
         self._spheres = None
         self._published: dict = {}
+        record = load_record(site.build)
+        self.wires = LiveWires(record) if record is not None else None
         # Held at the start: every bound state fed by no edge, at its domain's top (full).
         for name, spec in self.ports.items():
             if spec.node == self.render_id and (spec.node, spec.port) not in self.fed and spec.range:
@@ -148,6 +151,18 @@ class LiveTwin:
                 if self._published.get(name, _MISSING) != v:
                     changed[name] = self._published[name] = v
         return changed
+
+    # -- the wires
+    def render_values(self) -> dict:
+        return self.graph.nodes[self.render_id].values if self.render_id else {}
+
+    def conductors(self) -> dict | None:
+        """Each conductor group's temperature and its spans' sag now (None: no conductors)."""
+        return None if self.wires is None else self.wires.state(self.render_values())
+
+    def conductor_changes(self) -> dict:
+        """The groups whose temperature changed since the last call."""
+        return {} if self.wires is None else self.wires.changes(self.render_values())
 
     # -- camera
     def camera_command(self, req: dict) -> dict:

@@ -21,6 +21,19 @@ from ..files import atomic_path
 from ..geometry import catenary as cat
 from ..geometry.wires import bundle_paths
 
+def sdf_choices(conductors_json: Path, temperatures: list[float | None]) -> list[str | None]:
+    """Per step, the SDF conductors model a world shows (conductors.json's sdf_variants):
+    the variant whose temperature is nearest the step's, or None for the world's own
+    as-built model (nearest the build's reference temperature, or no temperature)."""
+    record = json.loads(Path(conductors_json).read_text())
+    choices = [(float(record["temperature_c"]), None)] + [(v["temperature_c"], v["uri"])
+                                                          for v in record.get("sdf_variants", [])]
+    out = []
+    for temp in temperatures:
+        out.append(None if temp is None else min(choices, key=lambda c: (abs(c[0] - temp), c[0]))[1])
+    return out
+
+
 def span_paths(span: dict, types: dict, temperature_c: float) -> tuple[list[np.ndarray], float]:
     """The span's subconductor polylines (relative to its first end) at
     `temperature_c`, with the chosen LOD's segment count, and its sag (m)."""

@@ -10,7 +10,10 @@
   two small files. Shape bindings have no SDF equivalent (no morph targets): they are
   listed under "not_applied".
 - variants.jsonl: per step, which variant URI each stateful placement uses; a world
-  swaps the <include> URI when it changes.
+  swaps the <include> URI when it changes. With conductor temperatures, the step's
+  "conductors": the sag variant the scene built nearest that temperature
+  (scene/conductor_variants/, apply_conductors.sdf_choices), or null for the world's
+  own as-built `conductors` model.
 Only the quantised states that the run visits are built.
 """
 
@@ -96,7 +99,7 @@ def _config(name: str, asset: str) -> bytes:
     return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
 
 
-def write(run, out_dir: Path, quantum: float = 0.1) -> dict:
+def write(run, out_dir: Path, quantum: float = 0.1, conductors: list[str | None] | None = None) -> dict:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     summary: dict = {"files": [], "variants": [], "not_applied": []}
@@ -136,7 +139,9 @@ def write(run, out_dir: Path, quantum: float = 0.1) -> dict:
                 built.add(name)
                 summary["variants"].append({"name": name, "asset": ob.asset, "state": q})
             table[k][ob.tag] = f"model://{name}"
-    lines = [json.dumps({"k": k, "t": float(_f(t)), "placements": table[k]}, sort_keys=True)
+    wires = {} if conductors is None else {"conductors": conductors}
+    lines = [json.dumps({"k": k, "t": float(_f(t)), "placements": table[k],
+                         **{key: v[k] for key, v in wires.items()}}, sort_keys=True)
              for k, t in enumerate(run.times)]
     atomic_write(out_dir / "variants.jsonl", ("\n".join(lines) + "\n").encode())
     summary["files"].append(str(out_dir / "variants.jsonl"))

@@ -171,7 +171,12 @@ def run_scenario(scenario_path: Path, build_dir: Path, out_dir: Path | None = No
     if "sdf" in formats:
         from . import apply_sdf
 
-        summary["appliers"]["sdf"] = apply_sdf.write(data, out / "sdf", quantum=sdf_quantum)
+        wires, choices = build_dir / "scene" / "conductors.json", None
+        if data.conductor_temperature is not None and wires.is_file():
+            from . import apply_conductors
+
+            choices = apply_conductors.sdf_choices(wires, data.conductor_temperature)
+        summary["appliers"]["sdf"] = apply_sdf.write(data, out / "sdf", quantum=sdf_quantum, conductors=choices)
         step("sdf")
     summary["total_s"] = round(time.perf_counter() - t0, 4)
     return summary

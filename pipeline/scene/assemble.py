@@ -115,8 +115,9 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     out = Path(staging) / "scene"
     out.mkdir(parents=True, exist_ok=True)
-    conductors.write_record(out / "conductors.json", spans, wiring)
     wires = conductor_outputs.sdf_model(spans, out, capsules=wiring.collision == "capsules")
+    variants = conductor_outputs.sdf_variants(spans, wiring.sag_variants_c, out) if spans else []
+    conductors.write_record(out / "conductors.json", spans, wiring, sdf_variants=variants)
 
     def sdf_and_usd():
         world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,

@@ -7,12 +7,18 @@
   first end;
 - SDF: one static model `conductors` whose visuals are the tubes merged per conductor
   type and LOD (COLLADA beside the world, scene/conductors/), no collision unless
-  [wiring] collision = "capsules": then a capsule per polyline segment.
+  [wiring] collision = "capsules": then a capsule per polyline segment;
+- SDF sag variants: for each of [wiring] sag_variants_c, the same model with every
+  span carried to that conductor temperature by the change-of-state equation (same
+  segment counts), a model folder of its own (scene/conductor_variants/<name>/, meshes
+  by model:// URI as the packages'): what a world includes instead of the as-built
+  model when the runtime's conductor temperature is nearest that variant's.
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +27,14 @@ from .. import glb, ir
 from ..export.names import fmt, safe_name
 from ..geometry.transform import matrix_to_xyz_rpy
 from ..geometry.wires import tube
-from .conductors import Span, prim_names
+from ..geometry import catenary as cat
+from .conductors import Span, SpanLod, prim_names
 
 TUBE_SIDES = 6  # a 30 mm wire: the hexagon's flats are 2 mm inside the circle
 MATERIAL = ir.Material("conductor_aluminium", base_color=(0.62, 0.63, 0.64, 1.0), metallic=0.9, roughness=0.45)
 FOLDER = "conductors"  # beside the world file
 MODEL = "conductors"
+VARIANTS = "conductor_variants"  # beside the world file: a model folder per sag variant
 
 
 def span_mesh(span: Span, lod: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -118,17 +126,31 @@ def sdf_model(spans: list[Span], scene_folder: Path, capsules: bool = False):
     written to scene_folder/conductors/; None without spans."""
     from lxml import etree
 
-    from ..export.collada import _dae_bytes
-
     if not spans:
         return None
-    groups: dict[str, list[Span]] = defaultdict(list)
-    for s in spans:
-        groups[f"{s.ctype.name}__lod{s.lod}"].append(s)
     model = etree.Element("model", name=MODEL)
     etree.SubElement(model, "static").text = "true"
     link = etree.SubElement(model, "link", name="spans")
-    folder = Path(scene_folder) / FOLDER
+    _merged_visuals(link, spans, Path(scene_folder) / FOLDER, FOLDER)
+    if capsules:
+        names = prim_names(spans)
+        for s in spans:
+            pts = s.lods[s.lod].points
+            for i, (a, b) in enumerate(zip(pts[:-1], pts[1:])):
+                _capsule(link, f"{names[s.id]}__{i}", a, b, s.radius)
+    return model
+
+
+def _merged_visuals(link, spans: list[Span], folder: Path, uri_prefix: str) -> None:
+    """A visual per conductor type and LOD on `link`, its tubes merged into one COLLADA
+    file in `folder` (referred to as uri_prefix/<name>.dae), posed at its centre."""
+    from lxml import etree
+
+    from ..export.collada import _dae_bytes
+
+    groups: dict[str, list[Span]] = defaultdict(list)
+    for s in spans:
+        groups[f"{s.ctype.name}__lod{s.lod}"].append(s)
     folder.mkdir(parents=True, exist_ok=True)
     for group, members in sorted(groups.items()):
         meshes = [span_mesh(s) for s in members]
@@ -144,15 +166,57 @@ def sdf_model(spans: list[Span], scene_folder: Path, capsules: bool = False):
         visual = etree.SubElement(link, "visual", name=name)
         etree.SubElement(visual, "pose").text = " ".join(fmt(c) for c in (*centre.tolist(), 0, 0, 0))
         geometry = etree.SubElement(etree.SubElement(visual, "geometry"), "mesh")
-        etree.SubElement(geometry, "uri").text = f"{FOLDER}/{name}.dae"
+        etree.SubElement(geometry, "uri").text = f"{uri_prefix}/{name}.dae"
         etree.SubElement(visual, "cast_shadows").text = "true"
-    if capsules:
-        names = prim_names(spans)
-        for s in spans:
-            pts = s.lods[s.lod].points
-            for i, (a, b) in enumerate(zip(pts[:-1], pts[1:])):
-                _capsule(link, f"{names[s.id]}__{i}", a, b, s.radius)
-    return model
+
+
+def variant_name(temperature_c: float) -> str:
+    """The model (and folder) name of the sag variant at a temperature."""
+    return safe_name(f"{MODEL}__{temperature_c:g}C".replace("-", "minus"))
+
+
+def at_temperature(span: Span, temperature_c: float) -> Span:
+    """The span carried to `temperature_c`: its tension by the change of state, each
+    LOD's polyline with its segment count and its chord error measured again."""
+    c, t = span.curve, span.ctype
+    if temperature_c == span.temperature_c or c.straight:
+        return span
+    H = cat.change_of_state(c.p0, c.p1, t.w, t.ea, t.alpha_per_k, span.tension_n, span.temperature_c, temperature_c)
+    curve = cat.from_tension(c.p0, c.p1, H, t.w)
+    lods = tuple(SpanLod(lod.budget_m, cat.points(curve, lod.segments), cat.chord_error(curve, lod.segments))
+                 for lod in span.lods)
+    return replace(span, curve=curve, tension_n=H, temperature_c=temperature_c, lods=lods)
+
+
+def sdf_variants(spans: list[Span], temperatures, scene_folder: Path) -> list[dict]:
+    """Write scene/conductor_variants/<name>/ (model.sdf, model.config, meshes/) for
+    each temperature; [{temperature_c, model, uri, largest_sag_m}]."""
+    from lxml import etree
+
+    from ..export.sdf import SDF_VERSION
+
+    out = []
+    for temp in sorted({float(t) for t in temperatures}):
+        name = variant_name(temp)
+        folder = Path(scene_folder) / VARIANTS / name
+        moved = [at_temperature(s, temp) for s in spans]
+        root = etree.Element("sdf", version=SDF_VERSION)
+        model = etree.SubElement(root, "model", name=MODEL)  # the entity keeps its name when a world swaps it in
+        etree.SubElement(model, "static").text = "true"
+        link = etree.SubElement(model, "link", name="spans")
+        _merged_visuals(link, moved, folder / "meshes", f"model://{name}/meshes")
+        (folder / "model.sdf").write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8",
+                                                          pretty_print=True))
+        config = etree.Element("model")
+        etree.SubElement(config, "name").text = name
+        etree.SubElement(config, "version").text = "1.0"
+        etree.SubElement(config, "sdf", version=SDF_VERSION).text = "model.sdf"
+        etree.SubElement(config, "description").text = f"the site's conductors at {temp:g} deg C (substation-twin)"
+        (folder / "model.config").write_bytes(etree.tostring(config, xml_declaration=True, encoding="UTF-8",
+                                                             pretty_print=True))
+        out.append({"temperature_c": temp, "model": name, "uri": f"model://{name}",
+                    "largest_sag_m": round(max(cat.sag(s.curve) for s in moved), 6)})
+    return out
 
 
 def _capsule(link, name: str, a: np.ndarray, b: np.ndarray, radius: float) -> None:

@@ -264,7 +264,7 @@ def record(spans: list[Span], wiring: wsrc.Wiring) -> dict:
         "types": {n: {"diameter_m": t.diameter_m, "mass_kg_per_m": t.mass_kg_per_m, "ea_n": t.ea_n,
                       "alpha_per_k": t.alpha_per_k, "bundle_count": t.bundle_count,
                       "bundle_spacing_m": t.bundle_spacing_m, "max_temperature_c": t.max_temperature_c,
-                      "bundle_offsets_m": [_r(o) for o in t.bundle_offsets()]}
+                      "bundle_offsets_m": [_r(o) for o in t.bundle_offsets()], **_resistance(t)}
                   for n, t in ((n, wiring.types[n]) for n in types)},
         "spans": [{
             "id": s.id, "type": s.ctype.name, "source": s.spec.origin, "usd_path": f"{SCENE_ROOT}/Conductors/{names[s.id]}",
@@ -282,9 +282,19 @@ def record(spans: list[Span], wiring: wsrc.Wiring) -> dict:
     }
 
 
-def write_record(path: Path, spans: list[Span], wiring: wsrc.Wiring) -> None:
-    """conductors.json, a line per span (the file diffs by span)."""
+def _resistance(t: wsrc.ConductorType) -> dict:
+    """The type's AC resistances, for the live twin's thermal node, when conductors.toml gives them."""
+    if t.resistance_ohm_per_km is None:
+        return {}
+    return {"r25_ohm_per_km": t.resistance_ohm_per_km[0], "r75_ohm_per_km": t.resistance_ohm_per_km[1]}
+
+
+def write_record(path: Path, spans: list[Span], wiring: wsrc.Wiring, sdf_variants: list[dict] = ()) -> None:
+    """conductors.json, a line per span (the file diffs by span); with the SDF sag
+    variants (conductor_outputs.sdf_variants) when there are any."""
     data = record(spans, wiring)
+    if sdf_variants:
+        data["sdf_variants"] = list(sdf_variants)
     head = {k: v for k, v in data.items() if k != "spans"}
     lines = [json.dumps(s, sort_keys=True, separators=(",", ":")) for s in data["spans"]]
     text = json.dumps(head, sort_keys=True)[:-1] + ', "spans": [\n' + ",\n".join(lines) + "\n]}\n"

@@ -390,7 +390,20 @@ def terminal_lines(terminals) -> list[str]:
     return lines
 
 
-def finish(asset_id: str, out: Path) -> Path:
-    """Save the .blend (after a depsgraph update so parenting matrices are final)."""
+def terminal_empties(terminals) -> None:
+    """An Empty `terminal.<name>` (plain axes, 0.2 m) at each conductor attachment
+    point, model frame: what the pipeline reads as the asset's terminals."""
+    for name, xyz in terminals:
+        ob = bpy.data.objects.new(f"terminal.{name}", None)
+        ob.empty_display_type = "PLAIN_AXES"
+        ob.empty_display_size = 0.2
+        ob.location = tuple(float(v) for v in xyz)
+        bpy.context.scene.collection.objects.link(ob)
+
+
+def finish(asset_id: str, out: Path, terminals=()) -> Path:
+    """Save the .blend (after a depsgraph update so parenting matrices are final), with
+    the conductor terminals as `terminal.<name>` empties."""
+    terminal_empties(terminals)
     bpy.context.view_layer.update()
     return kit.save(asset_id, out)

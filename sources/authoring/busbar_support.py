@@ -57,12 +57,11 @@ def main() -> None:
     pedestal()
     insulator()
     bus_clamp()
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out, terminals=[("clamp", (0.0, 0.0, CLAMP_Z + 0.1))])
     P.write_asset_toml(out, ASSET_ID, "busbar_support",
                        "Lattice steel pedestal with a station post insulator and a bus clamp",
                        budgets=[0.005, 0.02, 0.08], collision="hull_per_part",
-                       triangle_budget=120000, mass_kg=650.0,
-                       terminals=[("clamp", (0.0, 0.0, CLAMP_Z + 0.1))])
+                       triangle_budget=120000, mass_kg=650.0)
 
 
 if __name__ == "__main__":

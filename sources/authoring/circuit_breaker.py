@@ -68,10 +68,10 @@ def main() -> None:
     pedestal()
     support_column()
     interrupter_head()
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out,
+             terminals=[(name, (sign * 1.69, 0.0, HEAD_Z + 0.16)) for name, sign in (("a", -1), ("b", 1))])
     P.write_asset_toml(out, ASSET_ID, "switchgear", "SF6 live-tank circuit breaker, one pole, T-shaped head",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=200000, mass_kg=2200.0,
-                       terminals=[(name, (sign * 1.69, 0.0, HEAD_Z + 0.16)) for name, sign in (("a", -1), ("b", 1))])
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=200000, mass_kg=2200.0)
 
 
 if __name__ == "__main__":

@@ -62,10 +62,10 @@ def main() -> None:
     base()
     column()
     head()
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out,
+             terminals=[(name, (sign * 0.64, 0.0, HEAD_BASE + 0.45)) for name, sign in (("a", -1), ("b", 1))])
     P.write_asset_toml(out, ASSET_ID, "instrument_transformer", "oil-insulated current transformer, one phase",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=1400.0,
-                       terminals=[(name, (sign * 0.64, 0.0, HEAD_BASE + 0.45)) for name, sign in (("a", -1), ("b", 1))])
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=1400.0)
 
 
 if __name__ == "__main__":

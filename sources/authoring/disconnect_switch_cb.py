@@ -1,7 +1,10 @@
 """Author sources/assets/disconnect_switch_cb: a centre-break disconnector, one pole.
 
 A steel support (legs and beam, with authored collision boxes) carries two rotating
-post-insulator columns 4.6 m apart. Each column turns on a revolute joint about Z and
+post-insulator columns 4.6 m apart. The beam tops out at 4 m: the sample strings this
+pole at 500 kV, whose live parts stand 5.4 m clear of the ground (IEC 61936-1's H,
+sources/clearances.toml), the blades' terminals at 6.8 m with the hot conductors' sag
+below them. Each column turns on a revolute joint about Z and
 carries half of the blade; the halves meet in the middle when closed. Blade half 2 is
 blade half 1 mirrored with a negative X scale, as a modeller would build it.
 
@@ -15,7 +18,7 @@ import _parts as P
 
 ASSET_ID = "disconnect_switch_cb"
 COLUMN_X = 2.3
-BEAM_TOP = 2.5
+BEAM_TOP = 4.0
 COLUMN_BASE = BEAM_TOP + 0.2
 COLUMN_HEIGHT = 2.3
 BLADE_Z = COLUMN_BASE + COLUMN_HEIGHT + 0.22
@@ -78,12 +81,12 @@ def main() -> None:
     for i, (x, sign) in enumerate(((-COLUMN_X, 1.0), (COLUMN_X, -1.0)), start=1):
         joint = column(i, x, beam)
         P.parent_keep(blade_half(f"blade_{i}", (x, 0.0, BLADE_Z), sign), joint)
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out,
+             terminals=[(name, (sign * COLUMN_X, 0.0, BLADE_Z + 0.08)) for name, sign in (("a", -1), ("b", 1))])
     P.write_asset_toml(out, ASSET_ID, "switchgear",
                        "centre-break disconnector, one pole, two rotating post-insulator columns",
                        budgets=(0.003, 0.015, 0.06), collision="hull_per_link",
-                       triangle_budget=100000, mass_kg=650.0,
-                       terminals=[(name, (sign * COLUMN_X, 0.0, BLADE_Z + 0.08)) for name, sign in (("a", -1), ("b", 1))])
+                       triangle_budget=100000, mass_kg=650.0)
 
 
 if __name__ == "__main__":

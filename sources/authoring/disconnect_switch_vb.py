@@ -82,11 +82,11 @@ def main() -> None:
     beam = support()
     head = operating_column(beam)
     blade(head)
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out, terminals=[("a", (-COLUMN_X, 0.0, COLUMN_BASE + COLUMN_HEIGHT + 0.1)),
+                                       ("b", (COLUMN_X, 0.0, HINGE_Z + 0.05))])
     P.write_asset_toml(out, ASSET_ID, "switchgear",
                        "vertical-break disconnector, one pole, blade hinged on the operating column",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=600.0,
-                       terminals=[("a", (-COLUMN_X, 0.0, COLUMN_BASE + COLUMN_HEIGHT + 0.1)), ("b", (COLUMN_X, 0.0, HINGE_Z + 0.05))])
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=600.0)
 
 
 if __name__ == "__main__":

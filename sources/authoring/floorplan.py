@@ -51,6 +51,7 @@ FOOTPRINT = {
     "post_insulator": (0.4, 0.4),
     "junction_box": (0.9, 0.6),
     "busbar_support": (1.0, 1.0),
+    "equipment_support": (1.1, 1.1),
     "rigid_busbar": (12.0, 0.25),
     "gantry": (21.0, 1.6),
     "lightning_mast": (1.6, 1.6),
@@ -59,6 +60,7 @@ FOOTPRINT = {
     "fence_segment": (3.0, 0.1),
 }
 SUPPORT_HEIGHT = 8.0  # busbar_support top: the busbars ride on it
+PEDESTAL_HEIGHT = 2.5  # equipment_support top: 500 kV CTs, arresters and post insulators stand on it
 PHASES = "ABC"
 
 # Terraces: (level, elevation, x0, y0, x1, y1). The gaps between them are exactly the
@@ -90,6 +92,12 @@ class Plan:
 
     def put(self, asset, tag, level, x, y, heading=0.0, z=0.0, state=None):
         self.items.append(Item(asset, tag, level, round(x, 3), round(y, 3), heading, z, state))
+
+    def put_raised(self, asset, tag, level, x, y, heading=0.0):
+        """500 kV equipment on an equipment_support (tagged SE-<tag>), its live parts
+        clear of the 5.4 m ground clearance of sources/clearances.toml."""
+        self.put("equipment_support", f"SE-{tag}", level, x, y, heading)
+        self.put(asset, tag, level, x, y, heading, z=PEDESTAL_HEIGHT)
 
 
 # --- L1: 500 kV breaker-and-a-half ------------------------------------------------
@@ -126,11 +134,11 @@ def yard_500(plan: Plan) -> None:
                 # Conductors run along y: the switches' blades and the breaker's
                 # interrupter turn to 90 degrees.
                 plan.put("disconnect_switch_cb", f"89-{b}1{ph}", "L1", x, y0 + 2.8, 90.0, state=f"89-{b}1{ph}")
-                plan.put("current_transformer", f"TC-{b}{ph}", "L1", x, y0 + 9.0)
+                plan.put_raised("current_transformer", f"TC-{b}{ph}", "L1", x, y0 + 9.0)
                 plan.put("circuit_breaker", f"52-{b}{ph}", "L1", x, y0 + 14.0, 90.0)
                 plan.put("disconnect_switch_cb", f"89-{b}2{ph}", "L1", x, y0 + 21.0, 90.0, state=f"89-{b}2{ph}")
                 if k < 2:  # the circuit takes off between two breakers
-                    plan.put("post_insulator", f"IP-{b}{ph}", "L1", x, y0 + 26.0)
+                    plan.put_raised("post_insulator", f"IP-{b}{ph}", "L1", x, y0 + 26.0)
         # Bay-end strain gantries beside the main buses.
         plan.put("gantry", f"PO-D{d + 1}S", "L1", xc, 53.0)
         plan.put("gantry", f"PO-D{d + 1}N", "L1", xc, 141.0)
@@ -139,10 +147,10 @@ def yard_500(plan: Plan) -> None:
         for ph, x in phases:
             plan.put("disconnect_switch_cb", f"89-L{south}{ph}", "L1", x, 23.5, 270.0, state=f"89-L{south}{ph}")
             plan.put("potential_transformer", f"TP-{south}{ph}", "L1", x, 17.0, 180.0)
-            plan.put("surge_arrester", f"PR-{south}{ph}", "L1", x, 13.0, 180.0)
+            plan.put_raised("surge_arrester", f"PR-{south}{ph}", "L1", x, 13.0, 180.0)
             plan.put("disconnect_switch_cb", f"89-L{north}{ph}", "L1", x, 170.5, 90.0, state=f"89-L{north}{ph}")
             plan.put("potential_transformer", f"TP-{north}{ph}", "L1", x, 177.0)
-            plan.put("surge_arrester", f"PR-{north}{ph}", "L1", x, 181.0)
+            plan.put_raised("surge_arrester", f"PR-{north}{ph}", "L1", x, 181.0)
         plan.put("gantry", f"PO-L{south}", "L1", xc, 8.0, 180.0)
         plan.put("gantry", f"PO-L{north}", "L1", xc, 186.0)
         if d in REACTOR_BANKS:
@@ -215,7 +223,7 @@ def platform_3(plan: Plan) -> None:
     for i, (ph, x) in enumerate(zip(PHASES, (140.0, 158.0, 176.0))):
         plan.put("power_transformer", f"AT-1{ph}", "L3", x, 110.0, state=f"trafo_T1{ph}")
         plan.put("surge_arrester", f"PR-AT1{ph}", "L3", x - 3.0, 101.0)
-        plan.put("surge_arrester", f"PR-AT5{ph}", "L3", x - 3.0, 119.0)
+        plan.put_raised("surge_arrester", f"PR-AT5{ph}", "L3", x - 3.0, 119.0)  # the 500 kV side
         plan.put("post_insulator", f"IP-AT{ph}", "L3", x + 3.0, 119.0)
         plan.put("junction_box", f"CJ-AT{ph}", "L3", x + 7.5, 104.0, 90.0)
     plan.put("control_house", "CASA-1", "L3", 190.0, 180.0, 90.0)
@@ -290,9 +298,12 @@ def overlaps(a: Item, b: Item) -> bool:
 
 
 def exempt(a: Item, b: Item) -> bool:
-    """Pairs meant to share ground: busbars ride on supports; fence panels chain."""
+    """Pairs meant to share ground: busbars ride on supports; 500 kV equipment stands on
+    its pedestal; fence panels chain."""
     kinds = {a.asset, b.asset}
-    return kinds == {"rigid_busbar", "busbar_support"} or kinds == {"fence_segment"}
+    on_its_pedestal = "equipment_support" in kinds and {a.tag, b.tag} == {"SE-" + a.tag.removeprefix("SE-"),
+                                                                           a.tag.removeprefix("SE-")}
+    return kinds == {"rigid_busbar", "busbar_support"} or kinds == {"fence_segment"} or on_its_pedestal
 
 
 def check(plan: Plan) -> None:

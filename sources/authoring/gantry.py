@@ -84,11 +84,11 @@ def main() -> None:
     kit.new_scene()
     steelwork()
     insulator_strings()
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out, terminals=TERMINALS)
     P.write_asset_toml(out, ASSET_ID, "gantry",
                        "Lattice steel line gantry, columns 20 m apart, three suspension insulator strings",
                        budgets=[0.01, 0.05, 0.2], collision="hull_per_part",
-                       triangle_budget=300000, mass_kg=9000.0, terminals=TERMINALS)
+                       triangle_budget=300000, mass_kg=9000.0)
 
 
 if __name__ == "__main__":

@@ -53,9 +53,9 @@ def main() -> None:
     kit.new_scene()
     base()
     top_cap(capacitor_units())
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out, terminals=TERMINALS)
     P.write_asset_toml(out, ASSET_ID, "instrument_transformer", "capacitive voltage transformer, one phase",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=900.0, terminals=TERMINALS)
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=100000, mass_kg=900.0)
 
 
 if __name__ == "__main__":

@@ -121,10 +121,10 @@ def main() -> None:
     bushings()
     conservator()
     front_equipment()
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out, terminals=TERMINALS)
     P.write_asset_toml(out, ASSET_ID, "transformer",
                        "500/230 kV single-phase autotransformer with a main-tank dial gauge",
-                       budgets=(0.004, 0.02, 0.08), triangle_budget=300000, mass_kg=260000.0, terminals=TERMINALS)
+                       budgets=(0.004, 0.02, 0.08), triangle_budget=300000, mass_kg=260000.0)
 
 
 if __name__ == "__main__":

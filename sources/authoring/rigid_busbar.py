@@ -52,11 +52,11 @@ def main() -> None:
     kit.new_scene()
     # Revolved about local Z, turned so local Z is the model X axis.
     P.revolve("busbar_tube", profile(), "aluminium", SEGMENTS, (0.0, 0.0, 0.0), (0.0, math.pi / 2, 0.0))
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out, terminals=TERMINALS)
     P.write_asset_toml(out, ASSET_ID, "busbar",
                        "Rigid aluminium tube busbar, 12 m along X, 0.2 m diameter, centred at z = 0",
                        budgets=[0.002, 0.01, 0.04], collision="box",
-                       triangle_budget=20000, mass_kg=75.0, terminals=TERMINALS)
+                       triangle_budget=20000, mass_kg=75.0)
 
 
 if __name__ == "__main__":

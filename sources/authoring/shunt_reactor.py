@@ -117,11 +117,10 @@ def main() -> None:
     conservator()
     indicators()
     control_cabinet()
-    P.finish(ASSET_ID, out)
+    P.finish(ASSET_ID, out, terminals=[("hv", (-BUSHING_X, 0.0, 7.51)), ("neutral", (BUSHING_X, 0.0, 7.51))])
     P.write_asset_toml(out, ASSET_ID, "reactor",
                        "500 kV single-phase shunt reactor with main-tank dial gauge and two bushing sight glasses",
-                       budgets=(0.003, 0.015, 0.06), triangle_budget=250000, mass_kg=180000.0,
-                       terminals=[("hv", (-BUSHING_X, 0.0, 7.51)), ("neutral", (BUSHING_X, 0.0, 7.51))])
+                       budgets=(0.003, 0.015, 0.06), triangle_budget=250000, mass_kg=180000.0)
 
 
 if __name__ == "__main__":

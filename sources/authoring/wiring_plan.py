@@ -1,6 +1,7 @@
 """The sample's conductors, drawn on the floor plan's conductor layers (floorplan.py
 writes them): every span a LINE from one terminal to another, its ends exactly on the
-terminals' plan points (asset.toml [[terminals]] turned by the INSERT heading).
+terminals' plan points (asset.toml [[terminals]] and a .blend's `terminal.<name>`
+empties, turned by the INSERT heading).
 
 - 500 kV diameters, per phase: the bus B tap strung up to the bay gantry, a dropper
   to the first disconnector, the breaker positions (disconnector, CT, breaker,
@@ -31,8 +32,22 @@ LAYERS = (LAYER_500_STRAIN, LAYER_500_DROP, LAYER_230_DROP)
 
 
 def terminals(asset: str) -> dict[str, tuple[float, float, float]]:
+    """An asset's terminals as the pipeline reads them: asset.toml [[terminals]] and,
+    for a .blend, its `terminal.<name>` empties (to the micrometre, as the manifest)."""
     data = tomllib.loads((ASSETS / asset / "asset.toml").read_text())
-    return {t["name"]: tuple(t["position"]) for t in data.get("terminals", [])}
+    out = {t["name"]: tuple(t["position"]) for t in data.get("terminals", [])}
+    source = ASSETS / asset / data["source"]
+    if source.suffix == ".blend":
+        out |= blend_terminals(source)
+    return out
+
+
+def blend_terminals(path: Path) -> dict[str, tuple[float, float, float]]:
+    import bpy
+
+    bpy.ops.wm.open_mainfile(filepath=str(path), load_ui=False, use_scripts=False)
+    return {ob.name.removeprefix("terminal."): tuple(round(v, 6) + 0.0 for v in ob.matrix_world.translation)
+            for ob in bpy.data.objects if ob.type == "EMPTY" and ob.name.startswith("terminal.")}
 
 
 class Wiring:

@@ -33,7 +33,7 @@ TRIANGLE_RANGES = {
 # Approximate size X x Y x Z (m) of each asset; the floor plan is laid out with them.
 SIZES = {
     "shunt_reactor": (8, 5, 7.5),
-    "disconnect_switch_cb": (5.6, 0.8, 5.5),
+    "disconnect_switch_cb": (5.6, 0.8, 7.0),
     "disconnect_switch_vb": (5, 0.8, 6),
     "ptz_camera_mast": (0.6, 0.6, 6.5),
     "circuit_breaker": (3.5, 1.2, 8),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import ezdxf
@@ -16,6 +17,7 @@ import mini_sources
 from pipeline import config, wiring
 from pipeline.builder.run import build
 from pipeline.errors import UserError
+from pipeline.geometry import catenary as cat
 from pipeline.georef import Georeferencer
 from pipeline.scene import conductor_outputs, conductors
 from pipeline.scene.placements import Placed, yaw_matrix
@@ -41,6 +43,7 @@ WIRING = """
 temperature_c = 40.0
 snap_tolerance_m = 0.3
 lod_chord_errors_m = [0.002, 0.02]
+sag_variants_c = [80.0, 0.0]
 [[wiring.layers]]
 layer = "CONDUCTOR_DROP"
 type = "ACSR_T"
@@ -207,6 +210,70 @@ def test_sdf_world_has_the_merged_conductor_visuals(built):
     assert r.status == "passed", r.messages
 
 
+def test_sdf_sag_variants_load_in_gazebo_with_the_change_of_state_sag(built, tmp_path):
+    """Each [wiring] sag_variants_c temperature is a model folder that `ign sdf -k` and
+    Gazebo's own loader (tools/gzprobe) accept; the level bus span's lowest vertex in
+    it is where the change-of-state tension puts the catenary (textbook sag)."""
+    import collada
+
+    from pipeline.runtime.apply_conductors import sdf_choices
+    from pipeline.validate import gazebo
+
+    _, out = built
+    record = json.loads((out / "scene" / "conductors.json").read_text())
+    variants = record["sdf_variants"]
+    assert [v["temperature_c"] for v in variants] == [0.0, 80.0]
+    folder = out / "scene" / conductor_outputs.VARIANTS
+    bus = next(s for s in record["spans"] if s["id"] == "bus")
+    p0, p1 = np.array(bus["from"]["enu"]), np.array(bus["to"]["enu"])
+    mid = (p0 + p1) / 2.0
+    lowest = []
+    for v in variants:
+        r = external.ign_sdf(folder / v["model"] / "model.sdf", [folder])
+        assert r.status == "passed", r.messages
+        if not gazebo.available():
+            continue
+        world = tmp_path / f"{v['model']}.sdf"
+        world.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>{v["uri"]}</uri>'
+                         '<name>conductors</name></include></world></sdf>\n')
+        seen = gazebo.probe_world(world, [folder])
+        assert seen["world"]["errors"] == [], seen["world"]["errors"]
+        [model] = seen["models"]
+        place = np.array(model["world_from_model"]).reshape(4, 4)
+        points = []
+        for use in (u for u in model["meshes"] if u["kind"] == "visual"):
+            m = place @ np.array(use["model_from_mesh"]).reshape(4, 4)
+            for geometry in collada.Collada(use["path"]).scene.objects("geometry"):
+                for prim in geometry.primitives():
+                    points.append(np.asarray(prim.vertex, dtype=np.float64) @ m[:3, :3].T + m[:3, 3])
+        points = np.concatenate(points)
+        # the bus's vertices: within its bundle's half-width of its line, in its middle third
+        d = (p1 - p0)[:2] / np.linalg.norm((p1 - p0)[:2])
+        along, across = (points[:, :2] - p0[:2]) @ d, (points[:, :2] - p0[:2]) @ np.array([-d[1], d[0]])
+        length = float(np.linalg.norm((p1 - p0)[:2]))
+        near = points[(np.abs(across) < 0.3) & (along > length / 3) & (along < 2 * length / 3)]
+        w = bus["weight_n_per_m"]
+        H = cat.change_of_state(p0, p1, w, 3.2e7 * 2, 2.0e-5, bus["tension_n"], bus["temperature_c"], v["temperature_c"])
+        curve = cat.from_tension(p0, p1, H, w)
+        assert cat.sag(curve) == pytest.approx(textbook(p0, p1, H, w), abs=1e-6)
+        true = cat.points(curve, 3000)
+        on_curve = np.interp((near[:, :2] - p0[:2]) @ d, (true[:, :2] - p0[:2]) @ d, true[:, 2])
+        # every tube ring hangs on the curve at its temperature: the hexagon's bottom is
+        # 13 to 15 mm under it, its top as far over it (plus the LOD's chord error)
+        budget = record["lod_chord_errors_m"][bus["lod"]]
+        below = near[:, 2] - on_curve
+        assert below.min() == pytest.approx(-0.014, abs=0.002 + budget), v
+        assert below.max() == pytest.approx(0.014, abs=0.002 + budget), v
+        lowest.append(float(np.mean(near[:, 2])))
+    if gazebo.available():
+        assert lowest[1] < lowest[0] - 0.05  # hotter, longer, lower (the middle third on average)
+    elif os.environ.get("CI"):
+        raise AssertionError(f"{gazebo.PROBE} is missing in CI: {gazebo.PROBE_HINT}")
+    # the runtime's choice: the nearest variant, the as-built model nearest the reference
+    assert sdf_choices(out / "scene" / "conductors.json", [None, 2.0, 35.0, 45.0, 79.0]) == [
+        None, "model://conductors__0C", None, None, "model://conductors__80C"]
+
+
 # --- errors, all in one report ----------------------------------------------------------
 
 
@@ -364,7 +431,7 @@ def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
     _, out = built
     scenario = tmp_path / "heat.toml"
     scenario.write_text(SCENARIO)
-    summary = run_scenario(scenario, out, tmp_path / "run", formats=("usd", "gltf"))
+    summary = run_scenario(scenario, out, tmp_path / "run", formats=("usd", "gltf", "sdf"))
     wires = summary["appliers"]["conductors_usd"]
     assert wires["spans"] == 3 and wires["samples"] == 5
     states = [json.loads(line) for line in (tmp_path / "run" / "states.jsonl").read_text().splitlines()]
@@ -391,6 +458,11 @@ def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
     assert all(b < a for a, b in zip(lowest, lowest[1:]))  # hotter, lower at mid-span
     r = external.usd_validation(tmp_path / "run" / "conductors.usda")
     assert r.status == "passed", r.messages
+    # SDF: each step names the sag variant nearest its temperature (None: the as-built 40 C model)
+    steps = [json.loads(line) for line in (tmp_path / "run" / "sdf" / "variants.jsonl").read_text().splitlines()]
+    nearest = {40.0: None, 0.0: "model://conductors__0C", 80.0: "model://conductors__80C"}
+    assert [s["conductors"] for s in steps] == [nearest[min(nearest, key=lambda c: abs(c - t))] for t in temps]
+    assert len({s["conductors"] for s in steps}) > 1
 
     # glTF: a morph target per further temperature, picked step by step
     from pipeline import glb

@@ -29,7 +29,10 @@ What becomes what:
   The notes say which values make a rest mesh and which are left to a binding
   (`evaluate`);
 - state bindings come from an object's `state*` properties and asset.toml's
-  `[[bindings]]` (`bindings`).
+  `[[bindings]]` (`bindings`);
+- an Empty named `terminal.<name>` is a conductor terminal at its world location, in
+  the model frame like everything else (`walk`); asset.toml `[[terminals]]` adds to
+  them, and a name in both is an error (builder.package_task).
 
 What the IR does not carry is said, one warning each in the metadata (`warning.<what>`,
 validate.checks SRC001), never dropped silently (`not_carried`):
@@ -122,5 +125,6 @@ def read_blend_path(
         description=description,
         source=str(path),
         metadata=scene_metadata(scene) + frame.metadata(),
+        terminals=sorted(scene.terminals.items()),
     )
     return transform_asset(asset, frame)

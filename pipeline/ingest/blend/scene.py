@@ -37,6 +37,7 @@ class Scene:
     opened: dict[str, str] = field(default_factory=dict)  # external images read: path in the folder -> sha256
     # objects and visuals whose shape-key weights asset.toml's bindings drive (driven_objects)
     driven: frozenset[str] = frozenset()
+    terminals: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # `terminal.<name>` empties
 
     def drives(self, ob) -> bool:
         """Whether a shape binding sets the object's shape-key weights."""

@@ -3,6 +3,7 @@ visuals and collisions of their links, materials and bindings as they come."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,9 @@ def read_scene(path: Path, scene: Scene) -> None:
         parent_of_link[joint.child] = joint.parent
 
     for ob in objects:
+        if ob.name.startswith(TERMINAL_PREFIX):
+            _read_terminal(path, ob, depsgraph, scene)
+            continue
         if ob.type not in GEOMETRY_TYPES:
             if "state" in ob.keys():
                 raise UserError(path, ob.name, "state binding on an object without geometry (bind the mesh itself)")
@@ -55,6 +59,23 @@ def read_scene(path: Path, scene: Scene) -> None:
     for material_name in referenced_materials(scene):
         if material_name not in scene.materials:
             scene.materials[material_name] = material(bpy, path, material_name, scene.warnings, scene.opened)
+
+
+TERMINAL_PREFIX = "terminal."
+TERMINAL_NAME = re.compile(r"^[a-z0-9_]+$")  # as asset.toml's (`TAG.terminal` splits at the last dot)
+
+
+def _read_terminal(path: Path, ob, depsgraph, scene: Scene) -> None:
+    """A conductor attachment point: an Empty named `terminal.<name>`, at its world
+    location (the model frame before units and up axis), whatever link it hangs on."""
+    name = ob.name[len(TERMINAL_PREFIX):]
+    if ob.type != "EMPTY":
+        raise UserError(path, ob.name, f"a terminal is an Empty; this is a {ob.type.lower()} "
+                                       f"(rename it, or make terminal {name!r} an Empty)")
+    if not TERMINAL_NAME.match(name):
+        raise UserError(path, ob.name, f"terminal name {name!r}: lower-case letters, digits and '_' only "
+                                       "(a '.001' suffix is Blender's copy of another terminal)")
+    scene.terminals[name] = tuple(float(v) for v in world_matrix(path, ob, depsgraph)[:3, 3])
 
 
 def _asset_objects(bpy) -> list:
