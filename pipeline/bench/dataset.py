@@ -13,7 +13,12 @@ same frames rendered side by side by:
                     label pass's share, and after/before), the files being identical.
 
 Each run starts from an empty dataset folder; every run's files must be byte-identical
-to local_1's (recorded). The quick mode renders 2 frames at 160x120."""
+to local_1's (recorded). The quick mode renders 2 frames at 160x120.
+
+`sun_in_view`: the labels where glare is in the picture (issue 38 item 8): frames of
+the same config in the first and last hours of daylight whose camera has the sun in its
+field of view, found by planning (no render), rendered, and every annotation of theirs
+decoded against its masks (datasets.verify)."""
 
 from __future__ import annotations
 
@@ -80,17 +85,68 @@ def dataset_section(ctx: Context) -> dict:
             "labels_median_s": statistics.median(timings["labels_s"]),
             "identical_to_local_1": files == reference}
     base = runs["local_1"]["seconds_per_frame"]
+    sun = sun_in_view(ctx, _config(source, ctx.work / "sun.toml", ctx.pick(400, 2000), width, height), built,
+                      ctx.pick(2, 8))
     before, after = runs["labels_before"], runs["local_1"]
-    labels = {"before": {k: before[k] for k in ("steady_frame_median_s", "render_median_s", "labels_median_s")},
-              "after": {k: after[k] for k in ("steady_frame_median_s", "render_median_s", "labels_median_s")},
-              "label_share_before": before["labels_median_s"] / (before["render_median_s"] + before["labels_median_s"]),
-              "label_share_after": after["labels_median_s"] / (after["render_median_s"] + after["labels_median_s"]),
+    parts = ("steady_frame_median_s", "render_median_s", "labels_median_s")
+    labels = {"before": {k: before[k] for k in parts}, "after": {k: after[k] for k in parts},
+              "label_share_before": _share(before), "label_share_after": _share(after),
               "frame_after_to_before": after["steady_frame_median_s"] / before["steady_frame_median_s"],
               "labels_after_to_before": after["labels_median_s"] / before["labels_median_s"],
               "identical": before["identical_to_local_1"]}
-    return {"labels": labels, "frame": f"{width}x{height}, labels included", "config": str(CONFIG), "runs": runs,
+    return {"labels": labels, "sun_in_view": sun, "frame": f"{width}x{height}, labels included", "config": str(CONFIG), "runs": runs,
             "ratios": {"dask_2_to_local_2": runs["dask_2"]["seconds_per_frame"] / runs["local_2"]["seconds_per_frame"],
                        "dask_1_to_local_1": runs["dask_1"]["seconds_per_frame"] / base,
                        "throughput_2_to_1_workers": runs["local_2"]["frames_per_minute"]
                        / runs["local_1"]["frames_per_minute"],
                        "per_frame_to_local_1": runs["per_frame"]["seconds_per_frame"] / base}}
+
+
+def _share(run: dict) -> float:
+    """The label pass's share of a frame's two passes."""
+    return run["labels_median_s"] / (run["render_median_s"] + run["labels_median_s"])
+
+
+def sun_in_view(ctx: Context, config: Path, built: Path, frames: int) -> dict:
+    """Render the first `frames` frames of `config` (its local-time window moved to the
+    morning's low sun) with the sun inside the camera's frame, and verify their labels."""
+    from ..datasets import config as dataset_config
+    from ..datasets.plan import Planner
+    from ..datasets.run import run_dataset
+    from ..datasets.verify import verify_frame
+    from ..runtime.site import load_site
+
+    config.write_text(re.sub(r'(?m)^local_time = .*$', 'local_time = ["05:40", "07:30"]', config.read_text()))
+    cfg = dataset_config.load(config)
+    planner = Planner(cfg, load_site(built, ctx.sources), ctx.sources)
+    t0 = time.perf_counter()
+    picked = [i for i in range(cfg.count) if _sun_in_frame(planner.plan(i), cfg.sensor.width, cfg.sensor.height)]
+    scan_s = time.perf_counter() - t0
+    if not picked:
+        return {"skipped": f"none of {cfg.count} planned frames has the sun in view"}
+    out = ctx.work / "dataset" / "sun"
+    out.mkdir(parents=True)
+    for sub in ("models", "scene"):
+        (out / sub).symlink_to(built / sub)
+    folder = run_dataset(config, out, sources=ctx.sources, indices=picked[:frames])
+    checked, problems, glare = 0, [], []
+    for i in picked[:frames]:
+        record = json.loads((folder / "records" / f"{i:06d}.json").read_text())
+        n, found = verify_frame(folder, record)
+        checked, problems = checked + n, problems + found
+        glare.append({"frame": record["frame_id"], "clipped_px": record["glare"]["clipped_px"],
+                      "hidden_pointers": sum(bool(g.get("glare_hides_pointer")) for g in record["gauges"])})
+    return {"planned": cfg.count, "sun_in_view": len(picked), "scan_s": scan_s, "rendered": len(glare),
+            "annotations": checked, "problems": problems, "frames": glare}
+
+
+def _sun_in_frame(plan, width: int, height: int) -> bool:
+    """The sun's disc centre projects inside the frame (above the horizon, occluded or not)."""
+    from ..geometry.pinhole import intrinsics, project
+
+    shot = plan.shot
+    if shot.sun_elevation <= 0:
+        return False
+    k = intrinsics(shot.lens.hfov, width, height)
+    u, v = project((shot.cam_pose[:3, 3] + 1.0e4 * shot.sun_dir)[None, :], shot.cam_pose, k)[0]
+    return bool(0 <= u < width and 0 <= v < height)

@@ -64,7 +64,7 @@ def _dataset_rows(d):
                  r["local_1"]["seconds_per_frame"], "s", "1 worker", note),
             _row("dataset", "s per frame, scene kept", r["local_1"]["seconds_per_frame"],
                  r["per_frame"]["seconds_per_frame"], "s", "the study's method: import and render per frame", note),
-            *_label_rows(d.get("labels"), r, note)]
+            *_label_rows(d.get("labels"), r, note), *_sun_in_view_rows(d.get("sun_in_view"), d["frame"])]
 
 
 def _label_rows(labels, r, note):
@@ -76,6 +76,15 @@ def _label_rows(labels, r, note):
                  labels["before"]["steady_frame_median_s"], "s", "the label pass sampled as light (before)", same),
             _row("dataset", "s per label pass", labels["after"]["labels_median_s"],
                  labels["before"]["labels_median_s"], "s", "the label pass sampled as light (before)", same)]
+
+
+def _sun_in_view_rows(sun, note):
+    """Labels where the sun is in the picture: annotations that are not their masks."""
+    if not sun or "annotations" not in sun:
+        return []
+    return [_row("dataset", "annotations not their masks, sun in view", len(sun["problems"]), sun["annotations"],
+                 "count", "annotations checked", f"{note}; {sun['rendered']} of {sun['sun_in_view']} frames "
+                                                  f"with the sun in view of {sun['planned']} planned")]
 
 
 def _viewer_rows(d):

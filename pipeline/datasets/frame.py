@@ -19,7 +19,7 @@ from ..perception.gauge import dial_of
 from ..render import appearance
 from ..render.sensor import PhoneCamera, clipped, develop, metered_gain, metered_white_balance
 from ..runtime.site import BuiltSite, load_site
-from . import config as dataset_config, labels, wire_labels
+from . import config as dataset_config, labels, parts as part_labels, wire_labels
 from .plan import FramePlan, Planner, switch_angles
 
 _WORKER: dict = {}  # the scene a Blender process keeps between frames of one dataset
@@ -31,7 +31,7 @@ def render(job: dict, index: int) -> dict:
     ctx = _context(job)
     shot = shoot(ctx, ctx["planner"].plan(index), job.get("labels_as_lights", False))
     write(Path(job["folder"]), shot)
-    return {"render_s": shot["render_s"], "labels_s": shot["labels_s"]}
+    return {k: shot[k] for k in ("render_s", "labels_s")}
 
 
 def _context(job: dict) -> dict:
@@ -65,7 +65,8 @@ def open_scene(site: BuiltSite, cam: PhoneCamera, seed: int, tags: list[str], lo
     scene.add_lamps([p["tag"] for p in site.placements if p["asset"] == "lighting_pole"])
     ids = labels.instance_ids(site.placements)
     scene.set_instances(ids)
-    scene.set_parts({tag: {name: labels.part_of(name) for name in objs} for tag, objs in scene.objects.items()})
+    scene.set_parts({tag: {name: part_labels.part_of(name) for name in objs} for tag, objs in scene.objects.items()},
+                    see_through=part_labels.GLASS)
     if looks:
         appearance.prepare(scene)
     cats = {c["name"]: c["id"] for c in labels.categories(site.manifests)}
@@ -77,8 +78,9 @@ def open_scene(site: BuiltSite, cam: PhoneCamera, seed: int, tags: list[str], lo
 
 def shoot(ctx: dict, plan: FramePlan, labels_as_lights: bool = False) -> dict:
     """One frame in an `open_scene`: {"plan", "rgb" uint8 (h, w, 3), "ids" uint16,
-    "depth" float32 (planar, m), "parts" uint16, "clip" bool (the sensor's clipped
-    pixels), "record", "render_s", "labels_s"}. Only what the plan names changes in the
+    "depth" float32 (planar, m), "parts" uint16, "behind" uint16 (the parts with the
+    glass transparent, parts.py), "clip" bool (the sensor's clipped pixels), "record",
+    "render_s", "labels_s" (the seconds of the picture and of the label pass)}. Only what the plan names changes in the
     scene (seed, shown placements, switch joints, camera, sun and sky, bound visuals,
     the look). `labels_as_lights`: the label pass as it was before issue 38 (the bench)."""
     from ..render.frames import shot_exposure
@@ -107,13 +109,20 @@ def shoot(ctx: dict, plan: FramePlan, labels_as_lights: bool = False) -> dict:
     rgb = develop(linear, gain, veil, wb, cam, seed=plan.seed)
     clip = clipped(linear, gain, veil, wb)
     t2 = time.perf_counter()
-    ids, depth, parts = wire_labels.label_frame(ctx, shot, *scene.render_labels(as_lights=labels_as_lights))
+    ids, depth, code = scene.render_labels(as_lights=labels_as_lights)
+    parts, behind = part_labels.split(code)
+    wired, depth, parts = wire_labels.label_frame(ctx, shot, ids, depth, parts)
+    behind = np.where(wired != ids, 0, behind).astype(behind.dtype)  # no gauge is seen through a wire
+    ids = wired
     t3 = time.perf_counter()
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
     record = _record(ctx, plan, k, ids, depth, gain, wb, float(veil.mean()), clip)
-    record["part_annotations"] = labels.part_annotations(ids, parts, ctx["tag_of"])
-    return {"plan": plan, "rgb": rgb, "ids": ids, "depth": depth, "parts": parts, "clip": clip, "record": record,
-            "render_s": t1 - t0, "labels_s": t3 - t2}
+    record["part_annotations"] = part_labels.part_annotations(ids, parts, ctx["tag_of"], behind)
+    record["gauge_annotations"] = [a for a in (part_labels.gauge_annotation(ids, parts, ctx["ids"][g["tag"]], g["tag"],
+                                                                            g["keypoints"])
+                                               for g in record["gauges"] if "keypoints" in g) if a is not None]
+    return {"plan": plan, "rgb": rgb, "ids": ids, "depth": depth, "parts": parts, "behind": behind, "clip": clip,
+            "record": record, "render_s": t1 - t0, "labels_s": t3 - t2}
 
 
 def write(folder: Path, shot: dict) -> None:
@@ -124,6 +133,7 @@ def write(folder: Path, shot: dict) -> None:
     atomic_write(folder / "masks" / f"{fid}.png", encode_png(shot["ids"]))
     atomic_write(folder / "glare" / f"{fid}.png", encode_png(shot["clip"].astype(np.uint8)))
     atomic_write(folder / "parts" / f"{fid}.png", encode_png(shot["parts"]))
+    atomic_write(folder / "behind_glass" / f"{fid}.png", encode_png(shot["behind"]))
     with atomic_path(folder / "depth" / f"{fid}.npy") as tmp:
         with open(tmp, "wb") as fh:
             np.save(fh, shot["depth"], allow_pickle=False)
@@ -182,7 +192,7 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         "gauges": _gauges(ctx, plan, k, ids, depth, clip),
         "instances": int(len(np.unique(ids[ids > 0]))),
         **({"appearance": plan.look} if plan.look is not None else {}),
-        "parts": f"parts/{fid}.png",
+        "parts": f"parts/{fid}.png", "behind_glass": f"behind_glass/{fid}.png",
         "gauge_keypoints": list(labels.KEYPOINTS),
         "glare": {"mask": f"glare/{fid}.png", "clipped_px": int(clip.sum()),
                   "definition": "1 where the sensor clips: the exposed radiance (render + lens veil) "

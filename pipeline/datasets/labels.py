@@ -1,12 +1,10 @@
 """Per-frame ground truth from the renderer's own passes: COCO instance annotations
-(RLE masks, tight boxes, pixel areas) from the instance-id image, the parts' from the
-part-id image with their parent instances, gauge visibility and keypoints
-from the ids and the depth at the dial's centre, and whether the sensor's clipped
-pixels cover a gauge's pointer. Pure numpy, OpenCV and pycocotools: no bpy."""
+(RLE masks, tight boxes, pixel areas) from the instance-id image, gauge visibility and
+keypoints from the ids and the depth at the dial's centre, and whether the sensor's
+clipped pixels cover a gauge's pointer (the parts: parts.py). Pure numpy, OpenCV and
+pycocotools: no bpy."""
 
 from __future__ import annotations
-
-import re
 
 import numpy as np
 
@@ -27,46 +25,6 @@ GLARE_HIDES_SHARE = 0.5
 # pointer's length), and the scale's ends on the tip's circle
 KEYPOINTS = ("dial_centre", "pointer_tip", "scale_start", "scale_end")
 TIP_RADIUS = float(POINTER_OUTLINE[:, 1].max())
-
-
-# Parts, from the packages' object names (sources/authoring/ASSETS.md names them so): a
-# part mask value is the part's id here (1 + its rank), 0 where no part is. First match wins.
-PARTS = (("gauge_pointer", r"(^|_)pointer$"), ("gauge_glass", r"^gauge_.*_glass$"),
-         ("gauge_dial", r"^gauge_.*_dial_(white|red)$"), ("gauge_bezel", r"^gauge_.*_bezel$"),
-         ("sight_glass", r"^gauge_b\d+_(tube|oil)$"), ("bushing", r"^bushing_"),
-         ("insulator", r"(^|_)insulator$|_sheds$"))
-PART_ID = {name: i + 1 for i, (name, _) in enumerate(PARTS)}
-
-
-def part_of(object_name: str) -> int:
-    """The part id of a package's object (its name without Blender's .001), 0 for none."""
-    return next((PART_ID[name] for name, rule in PARTS if re.search(rule, object_name)), 0)
-
-
-def part_categories() -> list[dict]:
-    return [{"id": PART_ID[name], "name": name, "supercategory": "part"} for name, _ in PARTS]
-
-
-def part_annotations(ids: np.ndarray, parts: np.ndarray, tag_of: dict[int, str]) -> list[dict]:
-    """One annotation per (instance, part) present, in that order: RLE, box and area of
-    its pixels, the part's category and its parent instance (id and tag)."""
-    out = []
-    pairs = np.unique(ids.astype(np.uint32) << 16 | parts.astype(np.uint32))
-    for key in pairs[(pairs >> 16 > 0) & (pairs & 0xFFFF > 0)]:
-        iid, pid = int(key >> 16), int(key & 0xFFFF)
-        ann = _rle_box((ids == iid) & (parts == pid))
-        out.append({"instance_id": iid, "tag": tag_of[iid], "category_id": pid, **ann, "iscrowd": 0})
-    return out
-
-
-def _rle_box(pixels: np.ndarray) -> dict:
-    from pycocotools import mask as rle
-
-    code = rle.encode(np.asfortranarray(pixels.astype(np.uint8)))
-    rows, cols = np.nonzero(pixels)
-    x0, y0 = int(cols.min()), int(rows.min())
-    return {"segmentation": {"size": [int(v) for v in code["size"]], "counts": code["counts"].decode("ascii")},
-            "area": int(rows.size), "bbox": [x0, y0, int(cols.max()) - x0 + 1, int(rows.max()) - y0 + 1]}
 
 
 def instance_ids(placements: list[dict]) -> dict[str, int]:

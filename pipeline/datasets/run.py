@@ -3,12 +3,15 @@
     OUT/datasets/<name>/
         images/<frame_id>.png    the phone's picture (8-bit sRGB)
         masks/<frame_id>.png     16-bit instance ids, 0 = background
-        parts/<frame_id>.png     16-bit part ids (labels.PARTS), 0 = no part; with the instance
+        parts/<frame_id>.png     16-bit part ids (parts.PARTS), 0 = no part; with the instance
                                  mask: which part of which instance
+        behind_glass/<frame_id>.png  the same with every glass transparent: what is behind it
+                                 (from the same label pass, parts.split)
         glare/<frame_id>.png     8-bit, 1 where the sensor clipped (sensor.clipped), else 0
         depth/<frame_id>.npy     float32 planar depth (m) along the optical axis, inf = sky
         records/<frame_id>.json  one frame's labels and annotations (what a resumed run keeps)
-        frames.jsonl, coco.json  the first N frames' records, assembled at the end; coco_parts.json:
+        frames.jsonl, coco.json  the first N frames' records, assembled at the end (coco.json: the
+                                 instances, then each gauge with its keypoints); coco_parts.json:
                                  the parts' COCO annotations, each naming its parent instance
         dataset.json             config digest, frames, renderer; timings.json: seconds
 
@@ -41,13 +44,14 @@ from ..engine.executors import EXECUTORS, outcome
 from ..engine.worker import Workers, run_task
 from ..errors import UserError
 from ..files import atomic_write
-from . import config as dataset_config, labels, wire_labels
+from . import config as dataset_config, labels, parts as part_labels, wire_labels
 from .blender_process import render_frame
 from .plan import Planner, frame_id
 from ..runtime.site import BuiltSite, load_site
 
 RENDERER = "blender-cycles-cpu"
-FOLDERS = ("images", "masks", "parts", "glare", "depth", "records")
+FOLDERS = ("images", "masks", "parts", "behind_glass", "glare", "depth", "records")
+ANNOTATIONS = ("annotations", "part_annotations", "gauge_annotations")  # coco.json's and coco_parts.json's
 THREADS = 2  # a frame's (CyclesScene.THREADS): the native thread pools of its worker get as many
 
 
@@ -56,19 +60,24 @@ THREADS = 2  # a frame's (CyclesScene.THREADS): the native thread pools of its w
 
 def run_dataset(config_path, out, *, frames: int | None = None, executor: str = "local",
                 scheduler: str | None = None, workers: int = 1, tasks_per_worker: int | None = None,
-                sources: Path, progress=None, labels_as_lights: bool = False) -> Path:
+                sources: Path, progress=None, labels_as_lights: bool = False, indices=None) -> Path:
     """Render the config's first `frames` frames (all by default) that are not on disk
     yet, then write frames.jsonl and coco.json. Returns the dataset's folder.
     Frames run on the engine's executors (`executor`: "local", "dask" on a
     LocalCluster or on the cluster at `scheduler`, "in-process"), `workers` at once,
     each in a Blender subprocess of its worker (blender_process.py); `tasks_per_worker`:
     frames a Blender process renders before it is replaced (default: the config's);
-    `labels_as_lights`: the label pass as it was before (the bench's "before")."""
+    `labels_as_lights`: the label pass as it was before (the bench's "before");
+    `indices`: these frames of the sequence instead of the first ones (the bench's
+    frames with the sun in view)."""
     cfg = dataset_config.load(config_path)
     n = cfg.count if frames is None else frames
     if not 1 <= n <= cfg.count:
         # the sequence is the config's: frames past its count belong to no dataset
         raise UserError(cfg.path, "--frames", f"{n}: from 1 to the config's count, {cfg.count}")
+    wanted = list(range(n)) if indices is None else sorted(set(indices))
+    if not wanted or not 0 <= wanted[0] <= wanted[-1] < cfg.count:
+        raise UserError(cfg.path, "indices", f"{wanted[:3]}...: frames from 0 to the config's count, {cfg.count}")
     out = Path(out)
     sources = Path(sources)
     site = load_site(out, sources)
@@ -76,9 +85,9 @@ def run_dataset(config_path, out, *, frames: int | None = None, executor: str = 
     _claim(folder, cfg)
     planner = Planner(cfg, site, sources)
     t0 = time.perf_counter()
-    union = sorted({t for i in range(n) for t in planner.plan(i).visible_tags})
+    union = sorted({t for i in wanted for t in planner.plan(i).visible_tags})
     plan_s = time.perf_counter() - t0
-    todo = [i for i in range(n) if not _done(folder, i)]
+    todo = [i for i in wanted if not _done(folder, i)]
     log = blender_log(out, cfg.name)
     log.parent.mkdir(parents=True, exist_ok=True)
     log.write_bytes(b"")  # this run's
@@ -95,11 +104,11 @@ def run_dataset(config_path, out, *, frames: int | None = None, executor: str = 
         parts = _render(cfg, job, todo, per_process, executor, scheduler, workers, log, progress)
         seconds = [p["seconds"] for p in parts]
     wall = time.perf_counter() - t0
-    _assemble(folder, cfg, site, n)
+    _assemble(folder, cfg, site, wanted)
     atomic_write(folder / "timings.json", json.dumps(
-        {"frames": n, "rendered": len(todo), "executor": executor, "workers": workers, "plan_s": plan_s,
+        {"frames": len(wanted), "rendered": len(todo), "executor": executor, "workers": workers, "plan_s": plan_s,
          "wall_s": wall, "frame_s": seconds, "scene_placements": len(union),
-         "render_s": [p.get("render_s") for p in parts], "labels_s": [p.get("labels_s") for p in parts]},
+         **{k: [p.get(k) for p in parts] for k in ("render_s", "labels_s")}},
         indent=1, sort_keys=True) + "\n")
     return folder
 
@@ -131,30 +140,39 @@ def _claim(folder: Path, cfg) -> None:
 def _done(folder: Path, index: int) -> bool:
     fid = frame_id(index)
     return all((folder / p).is_file() for p in (f"records/{fid}.json", f"images/{fid}.png", f"masks/{fid}.png",
-                                                f"parts/{fid}.png", f"glare/{fid}.png", f"depth/{fid}.npy"))
+                                                f"parts/{fid}.png", f"behind_glass/{fid}.png", f"glare/{fid}.png",
+                                                f"depth/{fid}.npy"))
 
 
-def _assemble(folder: Path, cfg, site: BuiltSite, n: int) -> None:
-    records = [json.loads((folder / "records" / f"{frame_id(i)}.json").read_text()) for i in range(n)]
-    lines = [json.dumps({k: v for k, v in r.items() if k not in ("annotations", "part_annotations")},
-                        sort_keys=True, separators=(",", ":")) for r in records]
+def _assemble(folder: Path, cfg, site: BuiltSite, indices: list[int]) -> None:
+    records = [json.loads((folder / "records" / f"{frame_id(i)}.json").read_text()) for i in indices]
+    lines = [json.dumps({k: v for k, v in r.items() if k not in ANNOTATIONS}, sort_keys=True, separators=(",", ":"))
+             for r in records]
     atomic_write(folder / "frames.jsonl", "\n".join(lines) + "\n")
-    images, anns = [], []
-    for i, r in enumerate(records):
-        images.append({"id": i + 1, "file_name": r["image"], "width": r["camera"]["width"],
-                       "height": r["camera"]["height"], "frame_id": r["frame_id"]})
-        for a in r["annotations"]:
-            anns.append({"id": len(anns) + 1, "image_id": i + 1, **a})
+    images = [{"id": i + 1, "file_name": r["image"], "width": r["camera"]["width"], "height": r["camera"]["height"],
+               "frame_id": r["frame_id"]} for i, r in enumerate(records)]
+    categories = wire_labels.categories(site, labels.categories(site.manifests))
+    gauge = part_labels.gauge_category(categories, labels.KEYPOINTS)
+    # the gauges after every instance: an instance's annotation keeps its id whether or not gauges are labelled
+    anns = _numbered(records, "annotations") + [{**a, "category_id": gauge["id"]}
+                                                for a in _numbered(records, "gauge_annotations")]
     coco = {"info": {"description": f"substation-twin dataset {cfg.name}", "version": cfg.digest[:12],
                      "year": int(records[0]["local_time"][:4]) if records else 0},
-            "licenses": [], "images": images, "annotations": anns,
-            "categories": wire_labels.categories(site, labels.categories(site.manifests))}
+            "licenses": [], "images": images, "annotations": _renumber(anns), "categories": categories + [gauge]}
     atomic_write(folder / "coco.json", json.dumps(coco, sort_keys=True, separators=(",", ":")) + "\n")
-    parts = [{"image_id": i + 1, **a} for i, r in enumerate(records) for a in r.get("part_annotations", [])]
-    parts = [{"id": j + 1, **a} for j, a in enumerate(parts)]
+    parts = _numbered(records, "part_annotations")
     atomic_write(folder / "coco_parts.json", json.dumps(
-        {**coco, "annotations": parts, "categories": labels.part_categories()},
+        {**coco, "annotations": parts, "categories": part_labels.part_categories()},
         sort_keys=True, separators=(",", ":")) + "\n")
+
+
+def _numbered(records: list[dict], key: str) -> list[dict]:
+    """The records' annotations under `key`, each with its image's id, numbered from 1."""
+    return _renumber([{"image_id": i + 1, **a} for i, r in enumerate(records) for a in r.get(key, [])])
+
+
+def _renumber(anns: list[dict]) -> list[dict]:
+    return [{**a, "id": j + 1} for j, a in enumerate(anns)]
 
 
 def _render(cfg, job: dict, todo: list[int], per_process: int, executor: str, scheduler: str | None,

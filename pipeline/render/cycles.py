@@ -21,6 +21,10 @@ from .sensor import PhoneCamera
 from . import conductors
 from ..runtime.site import Shot, BuiltSite
 
+# a see-through object's part code in the label pass: SEE_THROUGH x its part + the part behind it
+SEE_THROUGH = 256
+
+
 class CyclesScene:
     """One Cycles scene: imported packages, lights, camera. Packages are imported once
     per asset; more placements of it share its meshes (linked copies), except meshes with
@@ -349,19 +353,23 @@ class CyclesScene:
     def set_sky(self, aerosol: float) -> None:
         self.sky.aerosol_density = float(aerosol)
 
-    def set_parts(self, parts: dict[str, dict[str, int]]) -> None:
+    def set_parts(self, parts: dict[str, dict[str, int]], see_through=()) -> None:
         """Each object's part id (tag -> object name -> id, 0 for none), which the label
-        pass renders beside the instance ids."""
+        pass renders beside the instance ids; objects of the parts `see_through` (glass)
+        let the label pass see what is behind them too."""
         for tag, objs in self.objects.items():
             for name, ob in objs.items():
                 ob["twin_part"] = float(parts.get(tag, {}).get(name, 0))
+                ob["twin_glass"] = float(ob["twin_part"] in see_through)
 
     def render_labels(self, as_lights: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(instance ids uint16, planar depth float32 in metres, inf where no surface,
-        part ids uint16 (set_parts)) of the current frame, from Cycles itself: every
+        part code uint16 (set_parts)) of the current frame, from Cycles itself: every
         surface replaced by an emission of (object index, view Z depth, part id), one
         sample through each pixel's centre, so the ids are whole numbers and never blend
-        across an edge.
+        across an edge. A see-through object (a glass) also lets the ray go on: its part
+        code is SEE_THROUGH x its part id plus the part id of what the ray meets behind
+        it, whose index and depth add nothing (the glass's own stay in the first two).
 
         The emission is seen by camera rays only (nothing else shades), so Cycles is told
         not to sample it as light: otherwise it builds a light tree over every triangle
@@ -399,13 +407,42 @@ class CyclesScene:
         out = nt.nodes.new("ShaderNodeOutputMaterial")
         nt.links.new(info.outputs["Object Index"], rgb.inputs[0])
         nt.links.new(cam.outputs["View Z Depth"], rgb.inputs[1])
-        part = nt.nodes.new("ShaderNodeAttribute")
+        part, glass = (nt.nodes.new("ShaderNodeAttribute") for _ in range(2))
         part.attribute_type, part.attribute_name = "OBJECT", "twin_part"
-        nt.links.new(part.outputs["Factor"], rgb.inputs[2])
+        glass.attribute_type, glass.attribute_name = "OBJECT", "twin_glass"
+        # first: 1 on the ray's first surface, 0 behind a glass (whose R and G are the pixel's)
+        first = self._math(nt, "LESS_THAN", nt.nodes.new("ShaderNodeLightPath").outputs["Transparent Depth"], 0.5)
+        code = self._math(nt, "MULTIPLY", part.outputs["Factor"],
+                          self._math(nt, "MULTIPLY_ADD", glass.outputs["Factor"], float(SEE_THROUGH - 1), 1.0))
+        behind = self._math(nt, "MULTIPLY", part.outputs["Factor"],
+                            self._math(nt, "SUBTRACT", 1.0, glass.outputs["Factor"]))
+        nt.links.new(self._math(nt, "MULTIPLY", info.outputs["Object Index"], first), rgb.inputs[0])
+        nt.links.new(self._math(nt, "MULTIPLY", cam.outputs["View Z Depth"], first), rgb.inputs[1])
+        nt.links.new(self._math(nt, "MULTIPLY_ADD", first, self._math(nt, "SUBTRACT", code, behind), behind),
+                     rgb.inputs[2])
         nt.links.new(rgb.outputs[0], emit.inputs["Color"])
         emit.inputs["Strength"].default_value = 1.0
-        nt.links.new(emit.outputs[0], out.inputs["Surface"])
+        # a glass: its emission, and the ray goes on through it (a transparent closure, weight 1)
+        see = nt.nodes.new("ShaderNodeMixShader")
+        nt.links.new(glass.outputs["Factor"], see.inputs["Fac"])
+        nt.links.new(nt.nodes.new("ShaderNodeBsdfTransparent").outputs[0], see.inputs[2])
+        both = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(emit.outputs[0], both.inputs[0])
+        nt.links.new(see.outputs[0], both.inputs[1])
+        nt.links.new(both.outputs[0], out.inputs["Surface"])
         return mat
+
+    @staticmethod
+    def _math(nt, op: str, *inputs):
+        """A Math node of `inputs` (sockets or numbers); its output socket."""
+        node = nt.nodes.new("ShaderNodeMath")
+        node.operation = op
+        for slot, value in zip(node.inputs, inputs):
+            if isinstance(value, (int, float)):
+                slot.default_value = float(value)
+            else:
+                nt.links.new(value, slot)
+        return node.outputs[0]
 
     def _label_world(self):
         bpy = self.bpy

@@ -169,7 +169,8 @@ def test_scale_rows_put_the_sample_the_large_plan_and_the_stacked_one_side_by_si
 
 def test_the_dataset_section_compares_the_label_pass_before_and_after(tmp_path, monkeypatch):
     """The section's arithmetic on runs that write what run_dataset writes (no render):
-    the labels_before run against local_1, per frame and per label pass, and the rows."""
+    the labels_before run against local_1, per frame and per label pass, and the rows;
+    the sun-in-view check's row from its counts."""
     import json as _json
 
     from pipeline.bench import dataset as section
@@ -190,7 +191,9 @@ def test_the_dataset_section_compares_the_label_pass_before_and_after(tmp_path, 
             "labels_s": [labels] * 3, "plan_s": 0.1, "scene_placements": 3}))
         return folder
 
+    sun = {"planned": 400, "sun_in_view": 18, "rendered": 2, "annotations": 40, "problems": ["f: one"], "frames": []}
     monkeypatch.setattr(dataset_run, "run_dataset", fake_run)
+    monkeypatch.setattr(section, "sun_in_view", lambda *args: sun)  # it renders: tests/datasets covers it
     built = tmp_path / "built"
     (built / "scene").mkdir(parents=True)
     (built / "models").mkdir()
@@ -206,6 +209,8 @@ def test_the_dataset_section_compares_the_label_pass_before_and_after(tmp_path, 
     labels = d["labels"]
     assert labels["identical"] and labels["labels_after_to_before"] == 0.5
     assert labels["frame_after_to_before"] == pytest.approx(14.0 / 18.0)
-    assert labels["label_share_before"] == pytest.approx(8.0 / 18.0)
+    assert labels["label_share_before"] == pytest.approx(8.0 / 18.0) and labels["label_share_after"] == 4.0 / 14.0
     rows = {r["metric"]: r for r in _dataset_rows(d)}
     assert rows["s per label pass"]["ratio"] == 0.5 and "identical files" in rows["s per label pass"]["note"]
+    sun_row = rows["annotations not their masks, sun in view"]
+    assert sun_row["ours"] == 1 and sun_row["peer"] == 40 and "2 of 18 frames" in sun_row["note"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.datasets import parts
 from pipeline.geometry.pinhole import intrinsics
 from pipeline.perception.gauge import Dial
 
@@ -74,32 +75,90 @@ def test_gauge_keypoints_are_projected_with_their_visibility():
 
 
 def test_parts_come_from_the_packages_object_names():
-    from pipeline.datasets import labels
+    pid = parts.PART_ID
+    assert parts.part_of("gauge_tank_pointer") == pid["gauge_pointer"]
+    assert parts.part_of("gauge_tank_glass") == pid["gauge_glass"]
+    assert parts.part_of("gauge_tank_dial_red") == parts.part_of("gauge_tank_dial_white") == pid["gauge_dial"]
+    # a sight glass: the shunt reactor's tubes and the current transformer's window, the oil inside them
+    assert parts.part_of("gauge_b2_tube") == parts.part_of("sight_glass_window") == pid["sight_glass"]
+    assert parts.part_of("gauge_b1_oil") == parts.part_of("sight_glass_oil") == pid["sight_glass_oil"]
+    assert parts.part_of("bushing_hv_sheds") == pid["bushing"]  # a bushing's sheds are the bushing's
+    assert parts.part_of("column_1_insulator") == parts.part_of("chamber_2_insulator") == pid["insulator"]
+    assert parts.part_of("base_tank") == parts.part_of("conservator") == parts.part_of("window_glass") == 0
+    assert [c["id"] for c in parts.part_categories()] == list(range(1, len(parts.PARTS) + 1))
+    assert {n for n, i in pid.items() if i in parts.GLASS} == {"gauge_glass", "sight_glass"}
 
-    pid = labels.PART_ID
-    assert labels.part_of("gauge_tank_pointer") == pid["gauge_pointer"]
-    assert labels.part_of("gauge_tank_glass") == pid["gauge_glass"]
-    assert labels.part_of("gauge_tank_dial_red") == labels.part_of("gauge_tank_dial_white") == pid["gauge_dial"]
-    assert labels.part_of("gauge_b1_oil") == labels.part_of("gauge_b2_tube") == pid["sight_glass"]
-    assert labels.part_of("bushing_hv_sheds") == pid["bushing"]  # a bushing's sheds are the bushing's
-    assert labels.part_of("column_1_insulator") == labels.part_of("chamber_2_insulator") == pid["insulator"]
-    assert labels.part_of("base_tank") == labels.part_of("conservator") == 0
-    assert [c["id"] for c in labels.part_categories()] == list(range(1, len(labels.PARTS) + 1))
+
+def _gauge_frame():
+    """A 6x8 frame: instance 3 with a pointer, a glass over part of its dial, and some of
+    it no part; a glass pixel on the background."""
+    ids = np.zeros((6, 8), np.uint16)
+    p = np.zeros((6, 8), np.uint16)
+    ids[1:5, 1:7] = 3
+    p[1:3, 2:4] = parts.PART_ID["gauge_pointer"]
+    p[3:5, 2:7] = parts.PART_ID["gauge_dial"]
+    p[3:5, 5:7] = parts.PART_ID["gauge_glass"]
+    p[0, 0] = parts.PART_ID["gauge_glass"]  # a part on the background is no one's
+    return ids, p
 
 
 def test_part_annotations_name_their_parent_instance():
     from pycocotools import mask as rle
 
-    from pipeline.datasets import labels
-
-    ids = np.zeros((6, 8), np.uint16)
-    parts = np.zeros((6, 8), np.uint16)
-    ids[1:5, 1:7] = 3  # an instance with a pointer and a glass part, and some of it no part
-    parts[1:3, 2:4] = labels.PART_ID["gauge_pointer"]
-    parts[3:5, 5:7] = labels.PART_ID["gauge_glass"]
-    parts[0, 0] = labels.PART_ID["gauge_glass"]  # a part on the background is no one's
-    anns = labels.part_annotations(ids, parts, {3: "RE-A1"})
+    ids, p = _gauge_frame()
+    anns = parts.part_annotations(ids, p, {3: "RE-A1"})
+    pid = parts.PART_ID
     assert [(a["instance_id"], a["tag"], a["category_id"]) for a in anns] == [
-        (3, "RE-A1", labels.PART_ID["gauge_pointer"]), (3, "RE-A1", labels.PART_ID["gauge_glass"])]
+        (3, "RE-A1", pid["gauge_pointer"]), (3, "RE-A1", pid["gauge_glass"]), (3, "RE-A1", pid["gauge_dial"])]
     assert anns[0]["bbox"] == [2, 1, 2, 2] and anns[0]["area"] == 4
-    assert np.array_equal(rle.decode(anns[1]["segmentation"]).astype(bool), (ids == 3) & (parts == 2))
+    assert np.array_equal(rle.decode(anns[1]["segmentation"]).astype(bool), (ids == 3) & (p == pid["gauge_glass"]))
+    assert anns[2]["area"] == 6 and all(a["behind_glass_px"] == 0 for a in anns)
+
+
+def test_behind_the_glass_the_dial_is_labelled_and_the_glass_stays_glass():
+    """The label pass's part code: a glass's pixels hold SEE_THROUGH x its part plus what
+    the ray met behind it (the dial under its left column, the pointer under one pixel,
+    nothing under the last). The glass keeps its own pixels, the dial's annotation takes
+    those seen through the glass too."""
+    from pycocotools import mask as rle
+
+    from pipeline.render.cycles import SEE_THROUGH
+
+    ids, p = _gauge_frame()
+    pid = parts.PART_ID
+    code = p.astype(np.uint32).copy()
+    code[p == pid["gauge_glass"]] *= SEE_THROUGH
+    code[3:5, 5] += pid["gauge_dial"]
+    code[3, 6] += pid["gauge_pointer"]
+    flat, behind = parts.split(code.astype(np.uint16))
+    assert np.array_equal(flat, p) and flat.dtype == behind.dtype == np.uint16
+    assert behind[3, 5] == behind[4, 5] == pid["gauge_dial"] and behind[3, 6] == pid["gauge_pointer"]
+    assert behind[4, 6] == 0 and behind[0, 0] == 0  # nothing behind the glass there
+    assert np.array_equal(behind[p != pid["gauge_glass"]], p[p != pid["gauge_glass"]])
+    # a code that is no part, nor a glass's (Cycles on a glass's rim): no part in either image
+    odd = code.copy()
+    odd[2, 2], odd[2, 3] = 132, SEE_THROUGH * pid["bushing"] + pid["gauge_dial"]
+    assert [int(a[2, c]) for a in parts.split(odd.astype(np.uint16)) for c in (2, 3)] == [0, 0, 0, 0]
+    anns = {a["category_id"]: a for a in parts.part_annotations(ids, p, {3: "RE-A1"}, behind)}
+    glass = (ids == 3) & (p == pid["gauge_glass"])
+    assert np.array_equal(rle.decode(anns[pid["gauge_glass"]]["segmentation"]).astype(bool), glass)
+    dial = rle.decode(anns[pid["gauge_dial"]]["segmentation"]).astype(bool)
+    assert dial[3, 5] and dial[4, 5] and not dial[3, 6] and dial.sum() == 8
+    assert anns[pid["gauge_dial"]]["behind_glass_px"] == 2 and anns[pid["gauge_pointer"]]["behind_glass_px"] == 1
+    assert anns[pid["gauge_glass"]]["behind_glass_px"] == 0
+
+
+def test_a_gauge_is_an_annotation_of_its_own_with_its_keypoints():
+    from pycocotools import mask as rle
+
+    ids, p = _gauge_frame()
+    p[2, 6] = parts.PART_ID["bushing"]  # not a gauge's part
+    kp = [4.0, 3.0, 2, 3.5, 1.5, 2, 0.0, 0.0, 0, 6.5, 4.5, 1]
+    a = parts.gauge_annotation(ids, p, 3, "RE-A1", kp)
+    expected = (ids == 3) & np.isin(p, parts.GAUGE)
+    assert np.array_equal(rle.decode(a["segmentation"]).astype(bool), expected) and a["area"] == int(expected.sum())
+    assert a["keypoints"] == kp and a["num_keypoints"] == 3 and a["instance_id"] == 3 and a["tag"] == "RE-A1"
+    assert a["bbox"] == [2, 1, 5, 4]
+    assert parts.gauge_annotation(ids, np.zeros_like(p), 3, "RE-A1", kp) is None  # no gauge pixel in the frame
+    cat = parts.gauge_category([{"id": 1}, {"id": 4}], ("dial_centre", "pointer_tip", "scale_start", "scale_end"))
+    assert cat["id"] == 5 and cat["name"] == "gauge" and cat["skeleton"] == [[1, 2], [1, 3], [1, 4]]
