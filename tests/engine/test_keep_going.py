@@ -206,7 +206,9 @@ def outputs(out: Path, asset: str) -> dict[str, str]:
 
 
 def scene_files(out: Path) -> dict[str, str]:
-    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted((out / "scene").iterdir())}
+    scene = out / "scene"
+    return {str(p.relative_to(scene)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(scene.rglob("*")) if p.is_file()}
 
 
 def nudge(path: Path) -> None:
