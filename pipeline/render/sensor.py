@@ -92,7 +92,7 @@ class PhoneCamera:
     height: int = 240
     samples: int = 4
     render_denoise: str = "BALANCED"  # Cycles OIDN quality (FAST, BALANCED, HIGH); "" = off
-    denoise: float = 5.0  # ISP noise reduction (despeckle, then OpenCV NL-means h); 0 = off
+    denoise: float = 10.0  # ISP noise reduction (despeckle, then OpenCV NL-means h); 0 = off
 
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
