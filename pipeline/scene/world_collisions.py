@@ -96,6 +96,7 @@ class CollisionCells:
             offsets = np.cumsum([0] + [len(v) for v, _ in pieces[:-1]])
             vertices = np.concatenate([v for v, _ in pieces]) - corner
             faces = np.concatenate([f + k for (_, f), k in zip(pieces, offsets)])
+            vertices, faces = weld(vertices, faces)
             (out / f"{name}.dae").write_bytes(collada_bytes(name, vertices, faces))
             collision = etree.SubElement(link, "collision", name=name)
             etree.SubElement(collision, "pose").text = " ".join(fmt(v) for v in (*corner.tolist(), 0.0, 0.0, 0.0))
@@ -160,6 +161,28 @@ def read_collada_triangles(path: Path) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
     unit = doc.assetInfo.unitmeter or 1.0
     return np.concatenate(vertices) * unit, np.concatenate(faces)
+
+
+WELD_M = 1e-4  # 0.1 mm: Gazebo reads positions as float32 (ulp 7.6 um at 100 m, a cell's width) and merges equal ones
+
+
+def weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """One vertex for each group of positions within WELD_M of each other, the faces
+    renumbered, degenerate faces dropped. Piled devices' boxes share corners: written
+    apart, Gazebo's loader merged them and gave the merged corner one of their normals,
+    so the normals it read were not the file's (GZ005 on a 5,000-placement site)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    n = len(vertices)
+    pairs = cKDTree(vertices).query_pairs(WELD_M, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, group = connected_components(graph, directed=False)
+    _, first, inverse = np.unique(group, return_index=True, return_inverse=True)
+    faces = inverse.reshape(-1)[faces]
+    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
+    return vertices[first], faces[keep]
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
