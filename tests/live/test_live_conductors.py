@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import live_scene
+from wire_scenario import thermal_wire
 
 HEAT = """
 [scenario]
@@ -26,26 +27,9 @@ type = "constant"
 params = { value = 900.0, unit = "A" }
 
 [[nodes]]
-id = "wire"
-type = "conductor_thermal"
-params = { diameter_m = 0.03, r25_ohm_per_km = 0.0728, r75_ohm_per_km = 0.0869, ambient_c = 30.0 }
-
-[[nodes]]
 id = "render"
 type = "render"
-
-[[edges]]
-from = "load.value"
-to = "wire.current"
-type = "float"
-unit = "A"
-
-[[edges]]
-from = "wire.temperature"
-to = "render.conductors.temperature"
-type = "float"
-unit = "degC"
-"""
+""" + thermal_wire("load.value")
 
 
 def _strung_across(pose: np.ndarray, ahead: float, half: float) -> dict:

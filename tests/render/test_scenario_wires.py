@@ -5,6 +5,7 @@ strings its spans at (test_conductors_cycles)."""
 from __future__ import annotations
 
 from helpers import SOURCES
+from wire_scenario import thermal_wire
 
 LOAD = """
 [[nodes]]
@@ -12,29 +13,12 @@ id = "load"
 type = "linear"
 params = { gain = 10.0, offset = 300.0, unit_in = "s", unit_out = "A" }
 
-[[nodes]]
-id = "wire"
-type = "conductor_thermal"
-params = { diameter_m = 0.03, r25_ohm_per_km = 0.0728, r75_ohm_per_km = 0.0869, ambient_c = 30.0 }
-
 [[edges]]
 from = "clock.t"
 to = "load.x"
 type = "float"
 unit = "s"
-
-[[edges]]
-from = "load.y"
-to = "wire.current"
-type = "float"
-unit = "A"
-
-[[edges]]
-from = "wire.temperature"
-to = "render.conductors.temperature"
-type = "float"
-unit = "degC"
-"""
+""" + thermal_wire("load.y")
 
 
 def test_a_scenarios_shots_carry_its_conductor_temperature(sample_build, tmp_path):

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import mini_sources
+from wire_scenario import thermal_wire
 from pipeline import config, wiring
 from pipeline.builder.run import build
 from pipeline.errors import UserError
@@ -394,11 +395,6 @@ type = "linear"
 params = { gain = 400.0, offset = 200.0, unit_in = "s", unit_out = "A" }
 
 [[nodes]]
-id = "wire"
-type = "conductor_thermal"
-params = { diameter_m = 0.03, r25_ohm_per_km = 0.0728, r75_ohm_per_km = 0.0869, ambient_c = 30.0, irradiance_w_m2 = 900.0 }
-
-[[nodes]]
 id = "render"
 type = "render"
 
@@ -407,19 +403,7 @@ from = "clock.t"
 to = "load.x"
 type = "float"
 unit = "s"
-
-[[edges]]
-from = "load.y"
-to = "wire.current"
-type = "float"
-unit = "A"
-
-[[edges]]
-from = "wire.temperature"
-to = "render.conductors.temperature"
-type = "float"
-unit = "degC"
-"""
+""" + thermal_wire("load.y", "irradiance_w_m2 = 900.0")
 
 
 def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
