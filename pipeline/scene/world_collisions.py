@@ -168,9 +168,9 @@ WELD_M = 1e-4  # 0.1 mm: Gazebo reads positions as float32 (ulp 7.6 um at 100 m,
 
 def weld(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One vertex for each group of positions within WELD_M of each other, the faces
-    renumbered, degenerate faces dropped. Piled devices' boxes share corners: written
-    apart, Gazebo's loader merged them and gave the merged corner one of their normals,
-    so the normals it read were not the file's (GZ005 on a 5,000-placement site)."""
+    renumbered, degenerate faces dropped. Piled devices' boxes share corners, and
+    Gazebo's loader merges corners it reads as equal, keeping one of their normals: a
+    cell must hold them as one already for Gazebo to read the normals the file has."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
