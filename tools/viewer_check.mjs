@@ -1,7 +1,8 @@
 // Opens a viewer page (index.html or globe.html of a served build/viewer/) in Debian's
 // Chromium, headless, WebGL through SwiftShader; waits until the page says it is
 // ready (or failed); prints one JSON document: the page's stats, page errors,
-// the time from navigation to ready, memory, and the result of --eval.
+// the time from navigation to ready, memory, and the result of --eval. A globe page's
+// render loop stops once it is ready (see below).
 //
 //   node tools/viewer_check.mjs --url URL [--mode viewer|globe] [--screenshot PNG]
 //        [--width 1280] [--height 800] [--timeout 240000] [--eval FILE]
@@ -78,6 +79,11 @@ async function main() {
     }
     out.ready_ms = Date.now() - t0;
     out.ready = await page.evaluate(`window.${flag}Ready === true`);
+    // Cesium's render loop keeps SwiftShader's GPU process busy (about a core) even
+    // in requestRenderMode with nothing to draw, and every later step waits behind
+    // it: a screenshot took 15-20 s. Once ready, the loop stops and the page is drawn
+    // once, on request, before the screenshot.
+    if (o.mode === "globe") await page.evaluate(() => { if (window.twinGlobe) window.twinGlobe.viewer.useDefaultRenderLoop = false; });
     out.stats = await page.evaluate(`window.${flag}Stats`);
     const metrics = Object.fromEntries((await cdp.send("Performance.getMetrics")).metrics.map((m) => [m.name, m.value]));
     out.memory = {js_heap_used_bytes: metrics.JSHeapUsedSize, js_heap_total_bytes: metrics.JSHeapTotalSize,
@@ -88,7 +94,10 @@ async function main() {
       return gl ? (ext ? gl.getParameter(ext.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER)) : null;
     });
     if (o.eval && out.ready) out.eval = await page.evaluate(fs.readFileSync(o.eval, "utf8"));
-    if (o.screenshot) await page.screenshot({path: o.screenshot, timeout: o.timeout});
+    if (o.screenshot) {
+      if (o.mode === "globe") await page.evaluate(() => { if (window.twinGlobe) window.twinGlobe.viewer.render(); });
+      await page.screenshot({path: o.screenshot, timeout: o.timeout});
+    }
     status = out.ready ? 0 : 1;
   } catch (e) {
     out.error = String(e.stack || e);
