@@ -272,6 +272,8 @@ struct MeshUse
   std::string path;
   Matrix modelFromMesh;
   Vec3 scale;
+  std::string link;  // the names of its link and of itself
+  std::string name;
 };
 
 struct ModelSummary
@@ -296,7 +298,7 @@ std::vector<ModelSummary> Summaries(const sdf::World &world)
       const sdf::Link *link = model->LinkByIndex(l);
       const Matrix modelFromLink =
           PoseMatrix(Resolved(link->SemanticPose(), "__model__", link->RawPose()));
-      auto add = [&](const std::string &kind, const sdf::Geometry *geom,
+      auto add = [&](const std::string &kind, const std::string &name, const sdf::Geometry *geom,
                      const ignition::math::Pose3d &pose) {
         if (!geom || geom->Type() != sdf::GeometryType::MESH || !geom->MeshShape())
         {
@@ -305,17 +307,17 @@ std::vector<ModelSummary> Summaries(const sdf::World &world)
         }
         const sdf::Mesh *mesh = geom->MeshShape();
         summary.meshes.push_back({kind, mesh->Uri(), ResolveUri(mesh->Uri(), mesh->FilePath()),
-                                  modelFromLink * PoseMatrix(pose), mesh->Scale()});
+                                  modelFromLink * PoseMatrix(pose), mesh->Scale(), link->Name(), name});
       };
       for (uint64_t v = 0; v < link->VisualCount(); ++v)
       {
         const sdf::Visual *visual = link->VisualByIndex(v);
-        add("visual", visual->Geom(), Resolved(visual->SemanticPose(), link->Name(), visual->RawPose()));
+        add("visual", visual->Name(), visual->Geom(), Resolved(visual->SemanticPose(), link->Name(), visual->RawPose()));
       }
       for (uint64_t c = 0; c < link->CollisionCount(); ++c)
       {
         const sdf::Collision *collision = link->CollisionByIndex(c);
-        add("collision", collision->Geom(),
+        add("collision", collision->Name(), collision->Geom(),
             Resolved(collision->SemanticPose(), link->Name(), collision->RawPose()));
       }
     }
@@ -454,7 +456,8 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
     for (size_t k = 0; k < model.meshes.size(); ++k)
     {
       const MeshUse &use = model.meshes[k];
-      out << (k ? "," : "") << "{\"kind\":\"" << use.kind << "\",\"uri\":" << Quote(use.uri)
+      out << (k ? "," : "") << "{\"kind\":\"" << use.kind << "\",\"link\":" << Quote(use.link)
+          << ",\"name\":" << Quote(use.name) << ",\"uri\":" << Quote(use.uri)
           << ",\"path\":" << Quote(use.path) << ",\"model_from_mesh\":"
           << MatrixJson(use.modelFromMesh) << ",\"scale\":" << Vec(use.scale) << "}";
     }
