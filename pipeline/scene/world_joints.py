@@ -100,15 +100,52 @@ def read_articulation(model_sdf: Path) -> Articulation | None:
     return articulation(safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model"))
 
 
-def _pose(el) -> np.ndarray:
-    text = el.findtext("pose") if el is not None else None
+def pose_of(el) -> np.ndarray:
+    """(4, 4) float64 of an SDF element's <pose> text (identity without one)."""
+    text = el.findtext("pose")
     values = [float(v) for v in text.split()] if text else [0.0] * 6
     return xyz_rpy_to_matrix(values[:3], values[3:6])
 
 
-def _pose_text(matrix: np.ndarray) -> str:
+def pose_text(matrix: np.ndarray) -> str:
     xyz, rpy = matrix_to_xyz_rpy(matrix)
     return " ".join(fmt(v) for v in (*xyz.tolist(), *rpy.tolist()))
+
+
+def scale_geometry(item, s: float) -> None:
+    """An SDF visual's or collision's geometry drawn `s` times its size (uniform)."""
+    geometry = item.find("geometry")
+    if geometry is None:
+        return
+    mesh = geometry.find("mesh")
+    if mesh is not None:
+        scale = mesh.find("scale")
+        old = [float(v) for v in scale.text.split()] if scale is not None else [1.0, 1.0, 1.0]
+        if scale is None:
+            scale = etree.SubElement(mesh, "scale")
+        scale.text = " ".join(fmt(v * s) for v in old)
+    for path in ("box/size", "cylinder/radius", "cylinder/length", "sphere/radius", "capsule/radius",
+                 "capsule/length", "ellipsoid/radii"):
+        for el in geometry.findall(path):
+            el.text = " ".join(fmt(float(v) * s) for v in el.text.split())
+
+
+def scale_element(item: etree._Element, offset: np.ndarray, scale: float, relative_to: str | None = None):
+    """`item` (a <visual> or <collision>) posed at `offset` @ its own pose, for a
+    placement drawn `scale` times its size (its offset and geometry scaled);
+    `relative_to`: the frame its pose is given in (None: its link's). Returns item."""
+    pose = item.find("pose")
+    if pose is None:
+        pose = etree.Element("pose")
+        item.insert(0, pose)
+    at = offset @ pose_of(item)
+    if scale != 1.0:
+        at[:3, 3] *= scale
+        scale_geometry(item, scale)
+    pose.text = pose_text(at)
+    if relative_to is not None:
+        pose.set("relative_to", relative_to)
+    return item
 
 
 def _text(parent, tag: str, text) -> etree._Element:
@@ -146,18 +183,16 @@ def link_visuals(models: Path, pl: Placed, art: Articulation, link: str, name: s
 def moving_model(name: str, models: Path, members: list[Placed], art: Articulation) -> etree._Element:
     """The non-static model `name` (`<variant>__moving`) of the members' moving links,
     joints and joint position controllers (the module's docstring)."""
-    from .world_sdf import scale_element  # world_sdf builds the world of these models
-
     model = etree.Element("model", name=name)
     for pl in members:
         tag, scale = pl.placement.tag, pl.placement.scale
         frame = placement_matrix(pl)
         for name in art.moving:
             source = art.links[name]
-            offset = _pose(source)
+            offset = pose_of(source)
             offset[:3, 3] *= scale
             link = etree.SubElement(model, "link", name=f"{tag}{SEPARATOR}{name}")
-            _text(link, "pose", _pose_text(frame @ offset))
+            _text(link, "pose", pose_text(frame @ offset))
             inertial = source.find("inertial")
             if inertial is not None:
                 link.append(copy.deepcopy(inertial))
@@ -182,9 +217,9 @@ def _joint(tag: str, source: etree._Element, art: Articulation, scale: float) ->
     if pose is not None and pose.get("relative_to"):
         raise ValueError(f"joint {source.get('name')}: a pose relative to {pose.get('relative_to')!r} is not supported")
     if pose is not None and scale != 1.0:
-        at = _pose(joint)
+        at = pose_of(joint)
         at[:3, 3] *= scale
-        pose.text = _pose_text(at)
+        pose.text = pose_text(at)
     return joint
 
 

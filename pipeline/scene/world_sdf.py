@@ -48,9 +48,9 @@ from lxml import etree
 
 from .. import safe_xml
 from ..export.names import WHOLE_COLLISION_FILE, fmt, lod_model_name, whole_mesh_file
-from ..geometry.transform import matrix_to_xyz_rpy, xyz_rpy_to_matrix
 from .placements import Placed
 from . import world_joints
+from .world_joints import pose_of as _pose_of, scale_element, scale_geometry as _scale_geometry
 from .world_collisions import CollisionCells, placement_key
 
 # A placement's own elements in a grouped model: `<TAG>__<visual or collision name>`.
@@ -147,53 +147,6 @@ def _append_moving(world: etree._Element, models: Path, variant: str, members: l
     runs = [members[k:k + world_joints.PER_MODEL] for k in range(0, len(members), world_joints.PER_MODEL)]
     for k, run in enumerate(runs):
         world.append(world_joints.moving_model(name if len(runs) == 1 else f"{name}{k}", models, run, art))
-
-
-def _pose_of(el) -> np.ndarray:
-    text = el.findtext("pose")
-    values = [float(v) for v in text.split()] if text else [0.0] * 6
-    return xyz_rpy_to_matrix(values[:3], values[3:6])
-
-
-def _pose_text(matrix: np.ndarray) -> str:
-    xyz, rpy = matrix_to_xyz_rpy(matrix)
-    return " ".join(fmt(v) for v in (*xyz.tolist(), *rpy.tolist()))
-
-
-def _scale_geometry(item, s: float) -> None:
-    """An SDF visual's or collision's geometry drawn `s` times its size (uniform)."""
-    geometry = item.find("geometry")
-    if geometry is None:
-        return
-    mesh = geometry.find("mesh")
-    if mesh is not None:
-        scale = mesh.find("scale")
-        old = [float(v) for v in scale.text.split()] if scale is not None else [1.0, 1.0, 1.0]
-        if scale is None:
-            scale = etree.SubElement(mesh, "scale")
-        scale.text = " ".join(fmt(v * s) for v in old)
-    for path in ("box/size", "cylinder/radius", "cylinder/length", "sphere/radius", "capsule/radius",
-                 "capsule/length", "ellipsoid/radii"):
-        for el in geometry.findall(path):
-            el.text = " ".join(fmt(float(v) * s) for v in el.text.split())
-
-
-def scale_element(item: etree._Element, offset: np.ndarray, scale: float, relative_to: str | None = None):
-    """`item` (a <visual> or <collision>) posed at `offset` @ its own pose, for a
-    placement drawn `scale` times its size (its offset and geometry scaled);
-    `relative_to`: the frame its pose is given in (None: its link's). Returns item."""
-    pose = item.find("pose")
-    if pose is None:
-        pose = etree.Element("pose")
-        item.insert(0, pose)
-    at = offset @ _pose_of(item)
-    if scale != 1.0:
-        at[:3, 3] *= scale
-        _scale_geometry(item, scale)
-    pose.text = _pose_text(at)
-    if relative_to is not None:
-        pose.set("relative_to", relative_to)
-    return item
 
 
 def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None,
