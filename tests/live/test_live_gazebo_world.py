@@ -67,4 +67,7 @@ def test_every_switch_command_reaches_a_joint_gazebo_moves(sample_build):
         # the position the twin opens it to is the limit the probe sets: the probe turned it there
         assert c["set"] == pytest.approx(float(position))
         assert c["child_rotation_rad"] == pytest.approx(abs(float(position)), abs=1e-9)
+        # its links move, nothing else: not the fixed parts (the grouped static model), not another switch
+        tag = topic.split("/")[2]
         assert c["model"] + "::" + c["child"] in c["moved"]
+        assert all(name.startswith(f"{c['model']}::{tag}__") for name in c["moved"])
