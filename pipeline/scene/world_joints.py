@@ -3,8 +3,8 @@
 A grouped model is static, and gz-sim moves nothing in a static model. So for each
 LOD variant with movable joints (export.names.MOVABLE_JOINTS: a disconnect switch's
 blade and columns) the world holds, beside the variant's static grouped model (which
-draws each placement's fixed links only, world_sdf), one non-static model
-`<variant>__moving` that holds, for every placement of the variant:
+draws each placement's fixed links only, world_sdf), non-static models of moving
+parts that hold, for every placement of the variant:
 
 - each moving link (the child of a movable joint, and every link below one) as
   `<TAG>__<link>`, at the placement's pose composed with the link's pose in the
@@ -21,8 +21,9 @@ draws each placement's fixed links only, world_sdf), one non-static model
   is driven at a velocity, not by a PID force against the blade's weight) and
   cmd_max at the joint's velocity limit (the speed the switch opens at).
 
-A model holds up to PER_MODEL placements, `<variant>__moving<k>` for the k-th run of
-them in tag order (`<variant>__moving` when one run holds all). sdformat 12 spends
+A model of moving parts holds up to PER_MODEL placements, `<variant>__moving<k>` for
+the k-th run of them in tag order (`<variant>__moving` when one run holds all; a
+scaled placement's is `<TAG>__moving`). sdformat 12 spends
 about 1.4 MB on each <model> of this kind, 0.83 MB on each <link> and 0.56 MB on each
 <joint> it parses, and less than 0.02 MB on a <plugin> (tools/gzprobe, 200 of each),
 so a model per placement would add 1.4 MB to every one. But dartsim makes a model one
