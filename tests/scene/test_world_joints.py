@@ -131,8 +131,8 @@ def test_dartsim_moves_each_joints_links_and_nothing_else(probed):
             assert c["set"] == pytest.approx(far)
             assert {name.split("::")[1] for name in c["moved"]} == {f"{tag}__{n}" for n in _below(joint.child)}
             if joint.type == "revolute":
-                assert c["child_rotation_rad"] == pytest.approx(abs(far) if abs(far) <= math.pi else 2 * math.pi - abs(far),
-                                                                abs=1e-9)
+                turned = abs(far) if abs(far) <= math.pi else 2 * math.pi - abs(far)
+                assert c["child_rotation_rad"] == pytest.approx(turned, abs=1e-9)
             else:  # the slide: along its axis, by the position set
                 assert c["child_rotation_rad"] == pytest.approx(0.0, abs=1e-9)
                 assert c["child_translation_m"] == pytest.approx(abs(far), abs=1e-9)

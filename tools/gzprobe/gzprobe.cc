@@ -312,7 +312,8 @@ std::vector<ModelSummary> Summaries(const sdf::World &world)
       for (uint64_t v = 0; v < link->VisualCount(); ++v)
       {
         const sdf::Visual *visual = link->VisualByIndex(v);
-        add("visual", visual->Name(), visual->Geom(), Resolved(visual->SemanticPose(), link->Name(), visual->RawPose()));
+        add("visual", visual->Name(), visual->Geom(),
+            Resolved(visual->SemanticPose(), link->Name(), visual->RawPose()));
       }
       for (uint64_t c = 0; c < link->CollisionCount(); ++c)
       {
