@@ -44,6 +44,7 @@ import numpy as np
 from lxml import etree
 
 from .. import safe_xml
+from ..errors import UserError
 from ..export.names import MOVABLE_JOINTS, fmt, joint_command_topic, whole_link_mesh_file
 from ..geometry.transform import matrix_to_xyz_rpy, xyz_rpy_to_matrix
 from .placements import Placed
@@ -98,7 +99,15 @@ def articulation(source_model: etree._Element) -> Articulation | None:
 
 
 def read_articulation(model_sdf: Path) -> Articulation | None:
-    return articulation(safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model"))
+    """The split of a variant's model.sdf; a joint posed relative to another frame than
+    its child link (which the package writer never does) is a UserError naming it."""
+    art = articulation(safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model"))
+    for joint in art.joints if art is not None else ():
+        pose = joint.find("pose")
+        if pose is not None and pose.get("relative_to") not in (None, "", joint.findtext("child")):
+            raise UserError(model_sdf, joint.get("name"), f"a joint posed relative to {pose.get('relative_to')!r}"
+                            " cannot be placed in the world's model of moving parts (only its child link's frame)")
+    return art
 
 
 def pose_of(el) -> np.ndarray:
@@ -216,7 +225,7 @@ def _joint(tag: str, source: etree._Element, art: Articulation, scale: float) ->
     joint.find("child").text = f"{tag}{SEPARATOR}{source.findtext('child')}"
     pose = joint.find("pose")
     if pose is not None and pose.get("relative_to"):
-        raise ValueError(f"joint {source.get('name')}: a pose relative to {pose.get('relative_to')!r} is not supported")
+        pose.set("relative_to", joint.findtext("child"))  # its child link, renamed (read_articulation)
     if pose is not None and scale != 1.0:
         at = pose_of(joint)
         at[:3, 3] *= scale

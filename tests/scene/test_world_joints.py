@@ -179,3 +179,18 @@ def test_at_rest_a_placement_shows_what_its_variant_alone_shows(built, probed, t
         theirs = _visual_points([u for u in single["meshes"] if u["kind"] == "visual"], scaled)
         assert len(ours) == len(theirs), tag
         np.testing.assert_allclose(np.sort(ours, axis=0), np.sort(theirs, axis=0), atol=1e-6, err_msg=tag)
+
+
+def test_a_joint_posed_in_another_frame_is_one_clear_error(tmp_path):
+    from pipeline.errors import UserError
+
+    model = tmp_path / "model.sdf"
+    model.write_text('<?xml version="1.0"?><sdf version="1.9"><model name="m"><link name="base"/><link name="blade"/>'
+                     '<joint name="hinge" type="revolute"><parent>base</parent><child>blade</child>'
+                     '<pose relative_to="base">0 0 1 0 0 0</pose><axis><xyz>0 1 0</xyz></axis></joint>'
+                     '</model></sdf>\n')
+    with pytest.raises(UserError) as caught:
+        world_joints.read_articulation(model)
+    assert caught.value.file == str(model) and caught.value.obj == "hinge" and "'base'" in caught.value.message
+    model.write_text(model.read_text().replace('relative_to="base"', 'relative_to="blade"'))
+    assert world_joints.read_articulation(model).moving == ("blade",)
