@@ -21,8 +21,9 @@ venv: $(STAMP)
 # installed on first use by `make scene` and `make test` (apt needs root or sudo).
 TOOLS  := tools/node_modules/.installed
 
-$(TOOLS): tools/package-lock.json .ci/install-tools tools/gzprobe/gzprobe.cc tools/gzprobe/Makefile \
-          tools/gzbridge/gzbridge.cc tools/gzbridge/Makefile
+$(TOOLS): tools/package-lock.json .ci/install-tools tools/gzprobe/gzprobe.cc tools/gzprobe/common.cc \
+          tools/gzprobe/physics.cc tools/gzprobe/probe.hh tools/gzprobe/Makefile tools/gzbridge/gzbridge.cc \
+           tools/gzbridge/Makefile
 	bash .ci/install-tools
 	touch $(TOOLS)
 

@@ -4,8 +4,10 @@ Through gz-sim's own transport interfaces, by tools/gzbridge (C++, Debian's
 ignition-transport11 and ignition-msgs8), which takes one command per line:
 - the sun: the world's `light_config` service (ignition.msgs.Light), as gz-sim's
   UserCommands system offers it (Fortress and Harmonic);
-- moving parts: joint position commands (ignition.msgs.Double on
-  /model/M/joint/J/0/cmd_pos, gz-sim's JointPositionController) or `set_pose`;
+- moving parts: joint position commands (ignition.msgs.Double) on the topic the
+  world's JointPositionController of that joint listens on (export.names.
+  joint_command_topic, which the world's writer gives the controller: scene.world_joints),
+  or `set_pose`;
 - materials: `visual_config` (ignition.msgs.Visual), which Harmonic offers and
   Fortress does not (its failure is counted, not fatal).
 A command that fails is counted and its first error of each kind is logged; the twin
@@ -24,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..export.names import joint_command_topic
 from ..geometry.transform import quaternions_from_matrices
 
 log = logging.getLogger("twin.gazebo")
@@ -58,8 +61,9 @@ class GazeboBridge:
         d = np.asarray(travel_enu, dtype=np.float64)
         self._send("light", name, *(_n(c) for c in d), _n(intensity), *(_n(c) for c in colour))
 
-    def joint(self, model: str, joint: str, position: float) -> None:
-        self._send("joint", model, joint, _n(position))
+    def joint(self, tag: str, joint: str, position: float) -> None:
+        """Placement `tag`'s joint `joint` (its name in the asset) to `position`."""
+        self._send("joint", joint_command_topic(tag, joint), _n(position))
 
     def pose(self, name: str, matrix) -> None:
         m = np.asarray(matrix, dtype=np.float64)

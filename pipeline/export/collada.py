@@ -104,10 +104,30 @@ def _write_whole(asset: ir.Asset, folder: Path, memo) -> list[str]:
             rel = names.whole_mesh_file(level)
             _write_whole_document(folder / rel, groups, memo)
             written.append(rel)
+    if any(j.type in names.MOVABLE_JOINTS for j in asset.joints):
+        written += _write_whole_links(asset, folder, memo)
     parts = [(link.pose @ c.pose, c.mesh) for link in asset.links for c in link.collisions]
     if parts:
         _write_document(folder / names.WHOLE_COLLISION_FILE, "whole_collision", merge_meshes(parts), None, {}, memo)
         written.append(names.WHOLE_COLLISION_FILE)
+    return written
+
+
+def _write_whole_links(asset: ir.Asset, folder: Path, memo) -> list[str]:
+    """Each link of an articulated asset at each coarse LOD, in the link frame
+    (names.whole_link_mesh_file): a grouped placement of it in the Gazebo world draws
+    its fixed links and each moving link with one visual apiece (scene.world_joints)."""
+    written = []
+    for level in range(1 if asset.lod_count > 1 else 0, asset.lod_count):
+        for link in asset.links:
+            by_material: dict[str, list] = {}
+            for visual in variant_visuals(asset, link, level):
+                by_material.setdefault(visual.material, []).append((visual.pose, visual.mesh(level)))
+            if by_material:
+                rel = names.whole_link_mesh_file(link.name, level)
+                _write_whole_document(folder / rel, [(asset.material(name), merge_meshes(parts))
+                                                     for name, parts in sorted(by_material.items())], memo)
+                written.append(rel)
     return written
 
 

@@ -49,6 +49,24 @@ def whole_mesh_file(lod: int) -> str:
 
 WHOLE_COLLISION_FILE = "meshes/whole__collision.dae"  # every collision mesh, model frame
 
+MOVABLE_JOINTS = ("revolute", "prismatic", "continuous")
+
+
+def whole_link_mesh_file(link: str, lod: int) -> str:
+    """Package-relative COLLADA file of one link of an articulated model at one LOD:
+    every visual of the link in the link frame, one submesh per material (the Gazebo
+    world draws a grouped placement's moving links, each as one visual, on joints)."""
+    return f"meshes/whole__{safe_name(link)}__lod{lod}.dae"
+
+
+def joint_command_topic(tag: str, joint: str) -> str:
+    """The gz-transport topic on which the Gazebo world listens for the position of a
+    placement's joint (ignition.msgs.Double): the world's JointPositionController of
+    that joint subscribes to it (scene.world_joints) and the live twin publishes on it
+    (bridges.gazebo). The form of gz-sim's default `/model/<model>/joint/<joint>/0/cmd_pos`,
+    with the placement's tag as the model."""
+    return f"/model/{tag}/joint/{joint}/0/cmd_pos"
+
 
 def collision_file(link: str, collision: str) -> str:
     return f"meshes/{safe_name(link)}__{safe_name(collision)}__collision.dae"

@@ -8,8 +8,8 @@ the count of those elements, and a world of one model per placement does not ope
 a laptop. So the world keeps a model per placement only where the placement needs one,
 and groups the rest:
 
-- an <include> of the placement's LOD variant for an articulated asset (its joints
-  move) or one a state binding drives (the runtime swaps the include's URI);
+- an <include> of the placement's LOD variant for an asset a state binding drives
+  (the runtime swaps the include's URI);
 - a placement drawn scaled ([floorplan] insert_scale = "apply") cannot be an include
   (SDF has no scale on one): it is a grouped model of its own, named by its TAG;
 - every other placement of a package variant goes into one static model named after
@@ -23,12 +23,19 @@ and groups the rest:
   variant's visuals and collisions, named `<TAG>__<name>` (`<TAG>__<link>__<name>`
   for a model of several links). A scaled placement's elements are posed at the
   scaled offsets and their geometry scaled (mesh <scale>, box, cylinder, sphere);
+- a placement of a variant with movable joints (a disconnect switch) is grouped so
+  too, but its grouped model draws its fixed links only, one <visual> `<TAG>__<link>`
+  each (names.whole_link_mesh_file); its moving links hang on their joints in a
+  non-static model of the variant's moving parts, with a JointPositionController per
+  movable joint listening on the topic the live twin publishes on (world_joints);
 - in the world, the grouped placements' collisions are not theirs but merged into a
   few cells of ground (world_collisions: `collision_cells`, one mesh shape a cell),
   and a placement that repeats another exactly (the same asset, scale and LOD at the
   same pose: devices piled on one insertion point) is its frame alone, the first
   drawing and colliding for both: at 5,000 placements one shape and one <collision>
-  each neither stepped in real time nor parsed within the budget.
+  each neither stepped in real time nor parsed within the budget. A switch collides
+  as it rests (its blade closed) wherever its joints are; a repeated switch keeps
+  moving parts of its own, as each is commanded on its own.
 """
 
 from __future__ import annotations
@@ -41,8 +48,9 @@ from lxml import etree
 
 from .. import safe_xml
 from ..export.names import WHOLE_COLLISION_FILE, fmt, lod_model_name, whole_mesh_file
-from ..geometry.transform import matrix_to_xyz_rpy, xyz_rpy_to_matrix
 from .placements import Placed
+from . import world_joints
+from .world_joints import pose_of as _pose_of, scale_element, scale_geometry as _scale_geometry
 from .world_collisions import CollisionCells, placement_key
 
 # A placement's own elements in a grouped model: `<TAG>__<visual or collision name>`.
@@ -108,6 +116,7 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         if pl.placement.scale != 1.0:
             world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag,
                                        cells=cells, drawn=drawn))
+            _append_moving(world, Path(models), variant, [pl], pl.placement.tag + world_joints.MODEL_SUFFIX)
         elif pl.placement.asset_id in own_model:
             inc = etree.SubElement(world, "include")
             _text(inc, "uri", f"model://{variant}")
@@ -119,6 +128,7 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
         world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, cells=cells, drawn=drawn))
+        _append_moving(world, Path(models), variant, members, variant + world_joints.MODEL_SUFFIX)
     merged = cells.write(Path(path).parent)
     if merged is not None:
         world.append(merged)
@@ -128,33 +138,15 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     Path(path).write_bytes(data)
 
 
-def _pose_of(el) -> np.ndarray:
-    text = el.findtext("pose")
-    values = [float(v) for v in text.split()] if text else [0.0] * 6
-    return xyz_rpy_to_matrix(values[:3], values[3:6])
-
-
-def _pose_text(matrix: np.ndarray) -> str:
-    xyz, rpy = matrix_to_xyz_rpy(matrix)
-    return " ".join(fmt(v) for v in (*xyz.tolist(), *rpy.tolist()))
-
-
-def _scale_geometry(item, s: float) -> None:
-    """An SDF visual's or collision's geometry drawn `s` times its size (uniform)."""
-    geometry = item.find("geometry")
-    if geometry is None:
+def _append_moving(world: etree._Element, models: Path, variant: str, members: list[Placed], name: str) -> None:
+    """The members' models of moving parts (world_joints), when the variant has movable
+    joints: `name`, or `<name><k>` for the k-th run of world_joints.PER_MODEL members."""
+    art = world_joints.read_articulation(models / variant / "model.sdf")
+    if art is None:
         return
-    mesh = geometry.find("mesh")
-    if mesh is not None:
-        scale = mesh.find("scale")
-        old = [float(v) for v in scale.text.split()] if scale is not None else [1.0, 1.0, 1.0]
-        if scale is None:
-            scale = etree.SubElement(mesh, "scale")
-        scale.text = " ".join(fmt(v * s) for v in old)
-    for path in ("box/size", "cylinder/radius", "cylinder/length", "sphere/radius", "capsule/radius",
-                 "capsule/length", "ellipsoid/radii"):
-        for el in geometry.findall(path):
-            el.text = " ".join(fmt(float(v) * s) for v in el.text.split())
+    runs = [members[k:k + world_joints.PER_MODEL] for k in range(0, len(members), world_joints.PER_MODEL)]
+    for k, run in enumerate(runs):
+        world.append(world_joints.moving_model(name if len(runs) == 1 else f"{name}{k}", models, run, art))
 
 
 def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None,
@@ -164,13 +156,17 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
     that frame, at the placement's scale: the package's whole model at the variant's
     LOD and all its collision meshes, one <visual> and one <collision> (`<TAG>__whole`,
     `<TAG>__collision`), when the package has them (export.collada._write_whole); else
-    a copy of each of the variant's visuals and collisions. `cells`: the world's merged
-    collisions, which take each member's collision instead when its package has the
-    whole collision mesh. `drawn`: the placements already in the world
-    (world_collisions.placement_key), shared by every call for one world: a member
-    that repeats one exactly (devices piled on one insertion point) is its frame alone,
-    the first one's visual and collision standing for both."""
+    a copy of each of the variant's visuals and collisions. A variant with movable
+    joints draws its fixed links only, one <visual> `<TAG>__<link>` each (or copies of
+    their visuals): its moving links are in its model of moving parts
+    (world_joints.moving_model). `cells`: the world's merged collisions, which take
+    each member's collision instead when its package has the whole collision mesh.
+    `drawn`: the placements already in the world (world_collisions.placement_key),
+    shared by every call for one world: a member that repeats one exactly (devices
+    piled on one insertion point) is its frame alone, the first one's visual and
+    collision standing for both."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
+    art = world_joints.articulation(source)
     source_links = source.findall("link")
     model = etree.Element("model", name=name or variant)
     _text(model, "static", "true")
@@ -190,31 +186,28 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
         collides = any(sl.find("collision") is not None for sl in source_links)
         if collides and cells is not None and cells.add(pl):
             collides = False
-        whole = _whole_elements(models, pl, collides)
+        whole = _whole_elements(models, pl, collides) if art is None else None
         if whole is not None:
             for item in whole:
                 link.append(item)
             continue
+        if art is not None:
+            for fixed in art.fixed:
+                for item in world_joints.link_visuals(models, pl, art, fixed, tag + GROUPED_SEPARATOR + fixed):
+                    link.append(scale_element(item, _pose_of(art.links[fixed]), pl.placement.scale, tag))
         for source_link in source_links:
+            if art is not None and (source_link.get("name") in art.moving or not collides):
+                continue  # drawn above; a moving link collides nowhere
             # names are unique within a link: with several links, the link's name too
             prefix = tag + GROUPED_SEPARATOR
             if len(source_links) > 1:
                 prefix += source_link.get("name") + GROUPED_SEPARATOR
-            for kind in ("visual", "collision") if collides else ("visual",):
+            kinds = ("collision",) if art is not None else ("visual", "collision") if collides else ("visual",)
+            for kind in kinds:
                 for el in source_link.findall(kind):
                     item = copy.deepcopy(el)
                     item.set("name", prefix + el.get("name"))
-                    pose = item.find("pose")
-                    if pose is None:
-                        pose = etree.Element("pose")
-                        item.insert(0, pose)
-                    pose.set("relative_to", tag)
-                    offset = _pose_of(source_link) @ _pose_of(el)
-                    if pl.placement.scale != 1.0:
-                        offset[:3, 3] *= pl.placement.scale
-                        _scale_geometry(item, pl.placement.scale)
-                    pose.text = _pose_text(offset)
-                    link.append(item)
+                    link.append(scale_element(item, _pose_of(source_link), pl.placement.scale, tag))
     return model
 
 

@@ -235,10 +235,11 @@ def world_findings(site: str, figures: dict) -> list[Finding]:
 
 
 def physics_findings(site: str, physics: dict) -> list[Finding]:
-    """dartsim's verdict on the world: every shape built, the world stepped."""
-    if not physics or (physics.get("ok") and not physics.get("failed_shapes")):
+    """dartsim's verdict on the world: every shape and joint built, the world stepped."""
+    if not physics or (physics.get("ok") and not physics.get("failed_shapes") and not physics.get("failed_joints")):
         return []
-    why = physics.get("error") or f"{physics.get('failed_shapes')} shapes failed"
+    why = physics.get("error") or "; ".join(f"{physics.get(k)} {what} failed" for k, what in (
+        ("failed_shapes", "shapes"), ("failed_joints", "joints")) if physics.get(k))
     return [finding("GZ011", site, f"dartsim could not build the world as gz-sim would: {why}")]
 
 

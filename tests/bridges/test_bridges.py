@@ -308,13 +308,14 @@ map = {{ open = 1.0, closed = 0.0 }}
 
 def test_the_sun_joints_poses_and_materials_reach_gz_sims_transport(tmp_path):
     from pipeline.bridges.gazebo import BRIDGE, GazeboBridge
+    from pipeline.export.names import joint_command_topic
 
     if not BRIDGE.is_file():
         if CI:
             pytest.fail(f"{BRIDGE} is not built (bash .ci/install-tools)")
         pytest.skip(f"{BRIDGE} is not built")
     env = {**os.environ, "IGN_PARTITION": f"twin_test_{os.getpid()}", "IGN_IP": "127.0.0.1"}
-    sim = subprocess.Popen([str(BRIDGE), "sim", "--world", "sample_substation", "--joint", "89-3A/blade"],
+    sim = subprocess.Popen([str(BRIDGE), "sim", "--world", "sample_substation", "--joint", joint_command_topic("89-3A", "blade")],
                            stdout=subprocess.PIPE, text=True, env=env)
     try:
         assert json.loads(sim.stdout.readline())["ready"]
@@ -338,6 +339,7 @@ def test_the_sun_joints_poses_and_materials_reach_gz_sims_transport(tmp_path):
     angle = math.degrees(math.acos(min(1.0, sum(a * b for a, b in zip(light["direction"], travel)))))
     assert angle < 0.01 and light["intensity"] == pytest.approx(0.8123, abs=1e-6)
     assert joint["type"] == "ignition.msgs.Double" and joint["data"] == 1.2345678901234567  # exact
+    assert joint["topic"] == "/model/89-3A/joint/blade/0/cmd_pos"  # gz-sim's own form of the topic
     assert set_pose["position"] == [12.5, -3.25, 0.75]
     assert set_pose["orientation"] == pytest.approx([0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5)], abs=1e-12)
     assert visual["diffuse"] == pytest.approx([0.9, 0.1, 0.1, 1.0], abs=1e-6)

@@ -85,6 +85,10 @@ def test_every_dae_passes_the_collada_schema(built):
     # the whole model at rest, a file per LOD, and all its collisions in one (the Gazebo world's grouped form)
     expected |= {names.whole_mesh_file(k) for k in range(1 if asset.lod_count > 1 else 0, asset.lod_count)}
     expected |= {names.WHOLE_COLLISION_FILE}
+    # an articulated asset's links, each at rest at each of those LODs (the world's moving parts)
+    assert any(j.type in names.MOVABLE_JOINTS for j in asset.joints)
+    expected |= {names.whole_link_mesh_file(link.name, k) for link in asset.links
+                 for k in range(1 if asset.lod_count > 1 else 0, asset.lod_count)}
     assert daes == sorted(expected)
     for rel in daes:
         result = external.collada_schema(parent / ASSET_ID / rel)

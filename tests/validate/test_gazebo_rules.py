@@ -76,3 +76,9 @@ def test_an_exact_reading_yields_nothing(tmp_path):
     assert gazebo.world_findings("w.sdf", {"errors": [], "peak_rss_mb": 1123.0, "parse_s": 2.0}) == []
     assert gazebo.world_findings("w.sdf", {"errors": [], "peak_rss_mb": 1123.0, "parse_s": 12.1}) == []
     assert gazebo.physics_findings("w.sdf", {"ok": True, "failed_shapes": 0}) == []
+    assert gazebo.physics_findings("w.sdf", {"ok": True, "failed_shapes": 0, "failed_joints": 0}) == []
+
+
+def test_a_joint_dartsim_cannot_build_is_a_finding():
+    found = gazebo.physics_findings("w.sdf", {"ok": True, "failed_shapes": 0, "failed_joints": 2})
+    assert [f.code for f in found] == ["GZ011"] and "2 joints failed" in found[0].message

@@ -4,11 +4,12 @@
 //                                   to gz-sim's own interfaces; answers one JSON line each:
 //     light NAME DX DY DZ INTENSITY R G B   /world/NAME/light_config (ignition.msgs.Light)
 //     pose NAME X Y Z QX QY QZ QW           /world/NAME/set_pose (ignition.msgs.Pose)
-//     joint MODEL JOINT POSITION            /model/MODEL/joint/JOINT/0/cmd_pos (msgs.Double),
-//                                           the topic of gz-sim's JointPositionController
+//     joint TOPIC POSITION                  TOPIC (ignition.msgs.Double): the topic on which the
+//                                           world's JointPositionController of the joint listens
+//                                           (the twin names it: export.names.joint_command_topic)
 //     visual NAME R G B A                   /world/NAME/visual_config (ignition.msgs.Visual),
 //                                           offered by Harmonic, not by Fortress
-//   gzbridge sim --world NAME --joint MODEL/JOINT ...
+//   gzbridge sim --world NAME --joint TOPIC ...
 //                                   serves those services and listens on those topics as
 //                                   gz-sim's UserCommands and JointPositionController do,
 //                                   and prints one JSON line for every message that arrives.
@@ -107,10 +108,9 @@ static int send_mode(const std::string &world, unsigned timeout_ms) {
       msgs::Set(&pose, ignition::math::Pose3d(x, y, z, qw, qx, qy, qz));
       emit(call(node, cmd, "/world/" + world + "/set_pose", pose, timeout_ms));
     } else if (cmd == "joint") {
-      std::string model, joint;
+      std::string topic;
       double position;
-      if (!(in >> model >> joint >> position)) { emit(reply(cmd, false, "usage: joint MODEL JOINT POSITION")); continue; }
-      const std::string topic = "/model/" + model + "/joint/" + joint + "/0/cmd_pos";
+      if (!(in >> topic >> position)) { emit(reply(cmd, false, "usage: joint TOPIC POSITION")); continue; }
       transport::Node::Publisher *pub = nullptr;
       for (auto &p : publishers) if (p.first == topic) pub = &p.second;
       if (!pub) {
@@ -169,14 +169,9 @@ static int sim_mode(const std::string &world, const std::vector<std::string> &jo
         rep.set_data(true);
         return true;
       }));
-  for (const auto &mj : joints) {
-    const auto slash = mj.find('/');
-    if (slash == std::string::npos) { std::fprintf(stderr, "gzbridge: --joint MODEL/JOINT, not %s\n", mj.c_str()); return 2; }
-    const std::string model = mj.substr(0, slash), joint = mj.substr(slash + 1);
-    const std::string topic = "/model/" + model + "/joint/" + joint + "/0/cmd_pos";
-    std::function<void(const msgs::Double &)> on_command = [topic, model, joint](const msgs::Double &m) {
-      emit("{\"topic\":" + quoted(topic) + ",\"type\":\"ignition.msgs.Double\",\"model\":" + quoted(model) +
-           ",\"joint\":" + quoted(joint) + ",\"data\":" + num(m.data()) + "}");
+  for (const auto &topic : joints) {
+    std::function<void(const msgs::Double &)> on_command = [topic](const msgs::Double &m) {
+      emit("{\"topic\":" + quoted(topic) + ",\"type\":\"ignition.msgs.Double\",\"data\":" + num(m.data()) + "}");
     };
     ok = ok && node.Subscribe(topic, on_command);
   }
@@ -189,7 +184,7 @@ static int sim_mode(const std::string &world, const std::vector<std::string> &jo
 }
 
 int main(int argc, char **argv) {
-  if (argc < 2) { std::fprintf(stderr, "usage: gzbridge send|sim --world NAME [--timeout MS] [--joint MODEL/JOINT ...]\n"); return 2; }
+  if (argc < 2) { std::fprintf(stderr, "usage: gzbridge send|sim --world NAME [--timeout MS] [--joint TOPIC ...]\n"); return 2; }
   const std::string mode = argv[1];
   std::string world;
   unsigned timeout_ms = 1000;

@@ -1,7 +1,7 @@
 // gzprobe: reads our outputs with Gazebo Fortress's own libraries and says what it saw.
 //
 //   gzprobe mesh FILE...                       every mesh through MeshManager::Load
-//   gzprobe world WORLD [--jobs N] [--physics SECONDS] [--no-meshes]
+//   gzprobe world WORLD [--jobs N] [--physics SECONDS] [--joints] [--no-meshes]
 //
 // The world is parsed once with sdf::Root::Load and the default parser configuration, as
 // gz-sim's server does; model:// URIs resolve through SDF_PATH (sdformat reads it
@@ -9,7 +9,11 @@
 // child process of its own, so a loader crash is a record ("signal": N), not the end of
 // the probe. --physics builds the world in the dartsim plugin the way gz-sim's Physics
 // system does (empty world, models, links, then each collision: meshes through
-// AttachMeshShape, other shapes through ConstructSdfCollision) and steps it at 1 ms.
+// AttachMeshShape, other shapes through ConstructSdfCollision; then the joints) and
+// steps it at 1 ms (physics.cc). --joints lists every JointPositionController of the
+// world's models (gz-sim Fortress's plugin: its <joint_name>, the topic it listens on,
+// whether sdf::Model::JointByName finds its joint) and, in dartsim, which links move
+// when that joint is set to its limit farthest from 0.
 //
 // Output: one JSON document on stdout. Per mesh: triangles, vertices, bounds, and sums
 // over every triangle corner of its position, squared position, normal and texture
@@ -62,33 +66,15 @@
 #include <sdf/Visual.hh>
 #include <sdf/World.hh>
 
+#include "probe.hh"
+
 namespace {
 
+using namespace gzprobe;
 using Matrix = ignition::math::Matrix4d;
 using Vec3 = ignition::math::Vector3d;
 
 // ---------------------------------------------------------------- JSON output
-
-std::string Quote(const std::string &s)
-{
-  std::string out = "\"";
-  for (unsigned char c : s)
-  {
-    if (c == '"' || c == '\\') { out += '\\'; out += static_cast<char>(c); }
-    else if (c == '\n') out += "\\n";
-    else if (c < 0x20) { char buf[8]; std::snprintf(buf, sizeof buf, "\\u%04x", c); out += buf; }
-    else out += static_cast<char>(c);
-  }
-  return out + "\"";
-}
-
-std::string Num(double v)
-{
-  if (!std::isfinite(v)) return "null";
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
-}
 
 std::string Vec(const Vec3 &v)
 {
@@ -122,20 +108,6 @@ double CurrentRssMb()
   long pages = 0, resident = 0;
   statm >> pages >> resident;
   return resident * (sysconf(_SC_PAGESIZE) / 1048576.0);
-}
-
-double Seconds(std::chrono::steady_clock::time_point since)
-{
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
-}
-
-// CPU seconds this process has spent: on a shared machine, what a figure costs apart
-// from the wait for a core.
-double CpuSeconds()
-{
-  struct timespec t;
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec + t.tv_nsec * 1e-9;
 }
 
 // ---------------------------------------------------------------- meshes
@@ -293,33 +265,6 @@ std::map<std::string, std::string> LoadMeshes(const std::vector<std::string> &pa
 
 // ---------------------------------------------------------------- world
 
-// model://name/rest -> the file under the first SDF_PATH folder that holds it; a
-// relative path -> beside the SDF file that names it (sdfFile), as gz-sim's asFullPath
-// resolves a mesh URI.
-std::string ResolveUri(const std::string &uri, const std::string &sdfFile)
-{
-  const std::string scheme = "model://";
-  if (uri.rfind(scheme, 0) != 0)
-  {
-    if (uri.rfind("file://", 0) == 0) return uri.substr(7);
-    if (uri.find("://") != std::string::npos || uri.empty() || uri[0] == '/') return uri;
-    const auto slash = sdfFile.rfind('/');
-    const std::string candidate = (slash == std::string::npos ? "" : sdfFile.substr(0, slash + 1)) + uri;
-    return access(candidate.c_str(), R_OK) == 0 ? candidate : "";
-  }
-  const std::string rest = uri.substr(scheme.size());
-  const char *env = std::getenv("SDF_PATH");
-  std::stringstream folders(env ? env : "");
-  std::string folder;
-  while (std::getline(folders, folder, ':'))
-  {
-    if (folder.empty()) continue;
-    const std::string candidate = folder + "/" + rest;
-    if (access(candidate.c_str(), R_OK) == 0) return candidate;
-  }
-  return "";
-}
-
 struct MeshUse
 {
   std::string kind;  // "visual" or "collision"
@@ -327,6 +272,8 @@ struct MeshUse
   std::string path;
   Matrix modelFromMesh;
   Vec3 scale;
+  std::string link;  // the names of its link and of itself
+  std::string name;
 };
 
 struct ModelSummary
@@ -338,15 +285,6 @@ struct ModelSummary
 };
 
 Matrix PoseMatrix(const ignition::math::Pose3d &pose) { return Matrix(pose); }
-
-// A pose resolved through the frame graph (relative_to, frames), as gz-sim's
-// ResolveSdfPose does; the raw pose where it cannot be resolved.
-ignition::math::Pose3d Resolved(const sdf::SemanticPose &semantic, const std::string &to,
-                                 const ignition::math::Pose3d &raw)
-{
-  ignition::math::Pose3d pose;
-  return semantic.Resolve(pose, to).empty() ? pose : raw;
-}
 
 std::vector<ModelSummary> Summaries(const sdf::World &world)
 {
@@ -360,7 +298,7 @@ std::vector<ModelSummary> Summaries(const sdf::World &world)
       const sdf::Link *link = model->LinkByIndex(l);
       const Matrix modelFromLink =
           PoseMatrix(Resolved(link->SemanticPose(), "__model__", link->RawPose()));
-      auto add = [&](const std::string &kind, const sdf::Geometry *geom,
+      auto add = [&](const std::string &kind, const std::string &name, const sdf::Geometry *geom,
                      const ignition::math::Pose3d &pose) {
         if (!geom || geom->Type() != sdf::GeometryType::MESH || !geom->MeshShape())
         {
@@ -369,17 +307,18 @@ std::vector<ModelSummary> Summaries(const sdf::World &world)
         }
         const sdf::Mesh *mesh = geom->MeshShape();
         summary.meshes.push_back({kind, mesh->Uri(), ResolveUri(mesh->Uri(), mesh->FilePath()),
-                                  modelFromLink * PoseMatrix(pose), mesh->Scale()});
+                                  modelFromLink * PoseMatrix(pose), mesh->Scale(), link->Name(), name});
       };
       for (uint64_t v = 0; v < link->VisualCount(); ++v)
       {
         const sdf::Visual *visual = link->VisualByIndex(v);
-        add("visual", visual->Geom(), Resolved(visual->SemanticPose(), link->Name(), visual->RawPose()));
+        add("visual", visual->Name(), visual->Geom(),
+            Resolved(visual->SemanticPose(), link->Name(), visual->RawPose()));
       }
       for (uint64_t c = 0; c < link->CollisionCount(); ++c)
       {
         const sdf::Collision *collision = link->CollisionByIndex(c);
-        add("collision", collision->Geom(),
+        add("collision", collision->Name(), collision->Geom(),
             Resolved(collision->SemanticPose(), link->Name(), collision->RawPose()));
       }
     }
@@ -410,124 +349,6 @@ bool ModelBounds(const ModelSummary &model, const std::string &kind,
     }
   }
   return any;
-}
-
-// ---------------------------------------------------------------- physics
-
-using PhysicsFeatures = ignition::physics::FeatureList<
-    ignition::physics::sdf::ConstructSdfWorld,
-    ignition::physics::sdf::ConstructSdfModel,
-    ignition::physics::sdf::ConstructSdfLink,
-    ignition::physics::sdf::ConstructSdfCollision,
-    ignition::physics::mesh::AttachMeshShapeFeature,
-    ignition::physics::CollisionDetector,
-    ignition::physics::ForwardStep>;
-
-// <physics><dart><collision_detector>, which gz-sim hands to SetCollisionDetector when
-// the world names one (SdfEntityCreator reads it; Physics applies it).
-std::string NamedCollisionDetector(const sdf::World &world)
-{
-  const sdf::Physics *physics = world.PhysicsDefault();
-  if (!physics || !physics->Element() || !physics->Element()->HasElement("dart")) return "";
-  sdf::ElementPtr dart = physics->Element()->GetElement("dart");
-  if (!dart->HasElement("collision_detector")) return "";
-  return dart->Get<std::string>("collision_detector");
-}
-
-std::string DartsimPluginPath()
-{
-  const char *env = std::getenv("GZPROBE_DARTSIM");
-  if (env) return env;
-  return "/usr/lib/x86_64-linux-gnu/ign-physics-5/engine-plugins/libignition-physics5-dartsim-plugin.so";
-}
-
-std::string Physics(const sdf::World &world, double seconds)
-{
-  ignition::plugin::Loader loader;
-  const auto names = loader.LoadLib(DartsimPluginPath());
-  ignition::plugin::PluginPtr plugin;
-  for (const auto &name : names)
-    if (name.find("dartsim") != std::string::npos) plugin = loader.Instantiate(name);
-  if (!plugin)
-    return "{\"ok\":false,\"error\":" + Quote("no dartsim plugin at " + DartsimPluginPath()) + "}";
-  auto engine = ignition::physics::RequestEngine3d<PhysicsFeatures>::From(plugin);
-  if (!engine) return "{\"ok\":false,\"error\":\"dartsim lacks a requested feature\"}";
-
-  const auto buildStart = std::chrono::steady_clock::now();
-  sdf::World emptyWorld;
-  emptyWorld.SetName(world.Name());
-  emptyWorld.SetGravity(world.Gravity());
-  auto physicsWorld = engine->ConstructWorld(emptyWorld);
-  const std::string detector = NamedCollisionDetector(world);
-  if (!detector.empty()) physicsWorld->SetCollisionDetector(detector);
-  int meshShapes = 0, primitiveShapes = 0, failed = 0;
-  for (uint64_t m = 0; m < world.ModelCount(); ++m)
-  {
-    const sdf::Model *source = world.ModelByIndex(m);
-    sdf::Model model;
-    model.SetName(source->Name());
-    model.SetRawPose(source->RawPose());
-    model.SetStatic(source->Static());
-    model.SetSelfCollide(source->SelfCollide());
-    auto physicsModel = physicsWorld->ConstructModel(model);
-    for (uint64_t l = 0; l < source->LinkCount(); ++l)
-    {
-      const sdf::Link *sourceLink = source->LinkByIndex(l);
-      sdf::Link link;
-      link.SetName(sourceLink->Name());
-      link.SetRawPose(Resolved(sourceLink->SemanticPose(), "__model__", sourceLink->RawPose()));
-      link.SetInertial(sourceLink->Inertial());
-      auto physicsLink = physicsModel->ConstructLink(link);
-      for (uint64_t c = 0; c < sourceLink->CollisionCount(); ++c)
-      {
-        const sdf::Collision *collision = sourceLink->CollisionByIndex(c);
-        const sdf::Geometry *geom = collision->Geom();
-        if (geom && geom->Type() == sdf::GeometryType::MESH && geom->MeshShape())
-        {
-          const sdf::Mesh *meshSdf = geom->MeshShape();
-          const auto *mesh = ignition::common::MeshManager::Instance()->Load(
-              ResolveUri(meshSdf->Uri(), meshSdf->FilePath()));
-          if (!mesh) { ++failed; continue; }
-          const auto pose = Resolved(collision->SemanticPose(), sourceLink->Name(), collision->RawPose());
-          physicsLink->AttachMeshShape(collision->Name(), *mesh, ignition::math::eigen3::convert(pose),
-                                       ignition::math::eigen3::convert(meshSdf->Scale()));
-          ++meshShapes;
-        }
-        else
-        {
-          // gz-sim hands dartsim a collision whose pose it resolved into the link frame
-          sdf::Collision resolved = *collision;
-          resolved.SetRawPose(Resolved(collision->SemanticPose(), sourceLink->Name(), collision->RawPose()));
-          resolved.SetPoseRelativeTo("");
-          if (physicsLink->ConstructCollision(resolved)) ++primitiveShapes; else ++failed;
-        }
-      }
-    }
-  }
-  const double buildSeconds = Seconds(buildStart);
-
-  ignition::physics::ForwardStep::Output output;
-  ignition::physics::ForwardStep::State state;
-  ignition::physics::ForwardStep::Input input;
-  const auto step = std::chrono::milliseconds(1);
-  input.Get<std::chrono::steady_clock::duration>() = step;
-  const int steps = static_cast<int>(std::lround(seconds / 0.001));
-  const auto stepStart = std::chrono::steady_clock::now();
-  const double stepCpuStart = CpuSeconds();
-  for (int i = 0; i < steps; ++i)
-    physicsWorld->Step(output, state, input);
-  const double wall = Seconds(stepStart);
-  const double cpu = CpuSeconds() - stepCpuStart;
-  const double simulated = steps * 0.001;
-  std::ostringstream out;
-  out << "{\"ok\":true,\"engine\":\"dartsim\",\"collision_detector\":"
-      << Quote(physicsWorld->GetCollisionDetector()) << ",\"build_s\":" << Num(buildSeconds)
-      << ",\"mesh_shapes\":" << meshShapes << ",\"primitive_shapes\":" << primitiveShapes
-      << ",\"failed_shapes\":" << failed << ",\"steps\":" << steps << ",\"step_s\":0.001"
-      << ",\"wall_s\":" << Num(wall) << ",\"cpu_s\":" << Num(cpu)
-      << ",\"real_time_factor\":" << Num(wall > 0 ? simulated / wall : 0.0)
-      << ",\"real_time_factor_cpu\":" << Num(cpu > 0 ? simulated / cpu : 0.0) << "}";
-  return out.str();
 }
 
 // ---------------------------------------------------------------- commands
@@ -566,7 +387,7 @@ bool ParseBounds(const std::string &report, Vec3 &lo, Vec3 &hi)
   return report.find("\"ok\":true") != std::string::npos && read("min", lo) && read("max", hi);
 }
 
-int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool meshes)
+int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool meshes, bool joints)
 {
   const double rssBefore = CurrentRssMb();
   const auto start = std::chrono::steady_clock::now();
@@ -636,7 +457,8 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
     for (size_t k = 0; k < model.meshes.size(); ++k)
     {
       const MeshUse &use = model.meshes[k];
-      out << (k ? "," : "") << "{\"kind\":\"" << use.kind << "\",\"uri\":" << Quote(use.uri)
+      out << (k ? "," : "") << "{\"kind\":\"" << use.kind << "\",\"link\":" << Quote(use.link)
+          << ",\"name\":" << Quote(use.name) << ",\"uri\":" << Quote(use.uri)
           << ",\"path\":" << Quote(use.path) << ",\"model_from_mesh\":"
           << MatrixJson(use.modelFromMesh) << ",\"scale\":" << Vec(use.scale) << "}";
     }
@@ -651,6 +473,7 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
   }
   out << "],\n\"meshes\":" << MeshesJson(reports);
   if (physicsSeconds > 0) out << ",\n\"physics\":" << Physics(*world, physicsSeconds);
+  if (joints) out << ",\n\"joints\":" << Joints(*world);
   out << "}\n";
   std::cout << out.str();
   return 0;
@@ -659,7 +482,7 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
 int Usage()
 {
   std::cerr << "usage: gzprobe mesh FILE... [--jobs N]\n"
-               "       gzprobe world WORLD [--jobs N] [--physics SECONDS] [--no-meshes]\n";
+               "       gzprobe world WORLD [--jobs N] [--physics SECONDS] [--joints] [--no-meshes]\n";
   return 2;
 }
 
@@ -672,19 +495,20 @@ int main(int argc, char **argv)
   std::vector<std::string> files;
   int jobs = 2;
   double physicsSeconds = 0;
-  bool meshes = true;
+  bool meshes = true, joints = false;
   for (int i = 2; i < argc; ++i)
   {
     const std::string arg = argv[i];
     if (arg == "--jobs" && i + 1 < argc) jobs = std::max(1, std::atoi(argv[++i]));
     else if (arg == "--physics" && i + 1 < argc) physicsSeconds = std::atof(argv[++i]);
     else if (arg == "--no-meshes") meshes = false;
+    else if (arg == "--joints") joints = true;
     else files.push_back(arg);
   }
   // Loader warnings stay in each mesh's "log"; the parent prints only its JSON.
   ignition::common::Console::SetVerbosity(2);
   if (command == "mesh" && !files.empty()) return MeshCommand(files, jobs);
   if (command == "world" && files.size() == 1)
-    return WorldCommand(files[0], jobs, physicsSeconds, meshes);
+    return WorldCommand(files[0], jobs, physicsSeconds, meshes, joints);
   return Usage();
 }

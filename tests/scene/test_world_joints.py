@@ -1,0 +1,196 @@
+"""The Gazebo world's moving parts (scene.world_joints): each movable joint of a grouped
+placement is a joint of a non-static model that gz-sim's JointPositionController moves,
+listening on the topic the live twin publishes on; dartsim moves its links and nothing
+else; at rest the placement shows what its variant placed alone shows."""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+
+from fixtures_assets import articulated_asset
+from pipeline import ir
+from pipeline.export.names import MOVABLE_JOINTS, joint_command_topic, lod_model_name
+from pipeline.export.package import write_package
+from pipeline.scene import world_joints, world_sdf
+from pipeline.scene.placements import Placed, yaw_matrix
+from pipeline.validate import gazebo
+
+SAFE = etree.XMLParser(resolve_entities=False, no_network=True, load_dtd=False)
+CI = bool(os.environ.get("CI"))
+ASSET = articulated_asset()
+# tag -> (yaw, ENU position, LOD, scale); A-3 repeats A-1 exactly (piled on its point)
+PLACES = {"A-1": (0.3, (10.0, 5.0, 1.0), 0, 1.0), "A-2": (-2.0, (-40.0, 12.0, 3.0), 1, 1.0),
+          "A-3": (0.3, (10.0, 5.0, 1.0), 0, 1.0), "A-4": (1.1, (25.0, -30.0, 0.5), 1, 1.5)}
+
+
+def _placed() -> list[Placed]:
+    return [Placed(ir.Placement(tag, ASSET.id, "L1", 0.0, 0.0, scale=scale), yaw_matrix(yaw, enu), yaw, lod)
+            for tag, (yaw, enu, lod, scale) in PLACES.items()]
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory) -> tuple[Path, Path]:
+    """The fixture's package and a world of its four placements (no terrain)."""
+    out = tmp_path_factory.mktemp("world_joints")
+    write_package(ASSET, out / "models")
+    world = out / "scene" / "w.sdf"
+    world.parent.mkdir()
+    world_sdf.write(world, site_name="w", origin_llh=(-12.7, -38.3, 48.0), placed=_placed(), terrain_model="none",
+                    sun={"intensity": 1.0, "elevation_deg": 40.0, "azimuth_deg": 30.0}, models=out / "models")
+    root = etree.parse(str(world), SAFE).getroot()
+    for include in root.iter("include"):  # the terrain: no package of it here
+        include.getparent().remove(include)
+    world.write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8"))
+    return out, world
+
+
+@pytest.fixture(scope="module")
+def probed(built) -> dict:
+    if not gazebo.available():
+        if CI:
+            pytest.fail(gazebo.PROBE_HINT)
+        pytest.skip(gazebo.PROBE_HINT)
+    out, world = built
+    env = dict(os.environ, SDF_PATH=str((out / "models").resolve()))
+    done = subprocess.run([str(gazebo.PROBE), "world", str(world), "--joints", "--physics", "0.05"],
+                          capture_output=True, text=True, env=env, timeout=300, check=False)
+    import json
+
+    return json.loads(done.stdout)
+
+
+def _movable() -> list[ir.Joint]:
+    return [j for j in ASSET.joints if j.type in MOVABLE_JOINTS]
+
+
+def _below(link: str) -> set[str]:
+    """`link` and every link below it."""
+    out = {link}
+    for j in ASSET.joints:
+        if j.parent in out or j.parent == link:
+            out |= _below(j.child)
+    return out
+
+
+def test_each_movable_joint_has_a_controller_on_the_twins_topic(built):
+    _, world = built
+    root = etree.parse(str(world), SAFE).getroot()
+    moving = [m for m in root.findall("world/model") if m.get("name").endswith(world_joints.MODEL_SUFFIX)]
+    assert moving and all(m.findtext("static") in (None, "false") for m in moving)
+    plugins = {p.findtext("joint_name"): p for m in moving for p in m.findall("plugin")}
+    joints = {j.get("name"): j for m in moving for j in m.findall("joint")}
+    for tag in PLACES:
+        for joint in _movable():
+            plugin = plugins[f"{tag}__{joint.name}"]
+            assert plugin.get("filename") == "ignition-gazebo-joint-position-controller-system"
+            assert plugin.get("name") == "ignition::gazebo::systems::JointPositionController"
+            assert plugin.findtext("topic") == joint_command_topic(tag, joint.name)
+            assert plugin.findtext("use_velocity_commands") == "true"
+            assert float(plugin.findtext("cmd_max")) == joint.velocity
+            # a joint from the fixed base hangs on the world; one below a moving link on it
+            parent = joints[f"{tag}__{joint.name}"].findtext("parent")
+            assert parent == ("world" if joint.parent == "base" else f"{tag}__{joint.parent}")
+    # the grouped model draws the fixed link only; the moving links draw in their own model
+    grouped = [m for m in root.findall("world/model") if m.find("frame") is not None]
+    drawn = {v.get("name") for m in grouped for v in m.iter("visual")}
+    assert drawn and all(name.split("__")[1] == "base" for name in drawn)
+    assert {link.get("name") for m in moving for link in m.findall("link")} == {
+        f"{tag}__{name}" for tag in PLACES for name in ("arm", "gauge", "slider")}
+
+
+def test_the_world_passes_ign_sdf(built):
+    out, world = built
+    if shutil.which("ign") is None:
+        if CI:
+            pytest.fail("ign is not installed (bash .ci/install-tools)")
+        pytest.skip("ign is not installed")
+    env = dict(os.environ, SDF_PATH=str((out / "models").resolve()))
+    done = subprocess.run(["ign", "sdf", "-k", str(world)], capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0 and "Valid" in done.stdout, done.stdout + done.stderr
+
+
+def test_dartsim_moves_each_joints_links_and_nothing_else(probed):
+    assert probed["world"]["errors"] == []
+    joints = probed["joints"]
+    assert joints["ok"] and joints["joints_failed"] == 0
+    by_topic = {c["topic"]: c for c in joints["controllers"]}
+    assert len(by_topic) == len(joints["controllers"]) == len(PLACES) * len(_movable())
+    for tag in PLACES:
+        for joint in _movable():
+            c = by_topic[joint_command_topic(tag, joint.name)]
+            assert c["found"] and c["in_physics"] and not c["static"] and c["velocity_commands"]
+            far = joint.lower if abs(joint.lower) > abs(joint.upper) else joint.upper
+            assert c["set"] == pytest.approx(far)
+            assert {name.split("::")[1] for name in c["moved"]} == {f"{tag}__{n}" for n in _below(joint.child)}
+            if joint.type == "revolute":
+                turned = abs(far) if abs(far) <= math.pi else 2 * math.pi - abs(far)
+                assert c["child_rotation_rad"] == pytest.approx(turned, abs=1e-9)
+            else:  # the slide: along its axis, by the position set
+                assert c["child_rotation_rad"] == pytest.approx(0.0, abs=1e-9)
+                assert c["child_translation_m"] == pytest.approx(abs(far), abs=1e-9)
+    physics = probed["physics"]
+    assert physics["ok"] and physics["failed_joints"] == 0
+    assert physics["joints"] == physics["velocity_commanded_joints"] == len(PLACES) * len(_movable())
+
+
+def _visual_points(uses: list[dict], world_from_model: np.ndarray) -> np.ndarray:
+    """(n, 3) every vertex of the meshes Gazebo placed (the probe's rows), in the world."""
+    import collada
+
+    points = []
+    for use in uses:
+        m = world_from_model @ np.array(use["model_from_mesh"]).reshape(4, 4)
+        m[:3, :3] = m[:3, :3] * np.asarray(use["scale"])  # a mesh's <scale> in its own frame
+        for geometry in collada.Collada(use["path"]).scene.objects("geometry"):
+            for prim in geometry.primitives():
+                points.append(np.asarray(prim.vertex, dtype=np.float64) @ m[:3, :3].T + m[:3, 3])
+    return np.concatenate(points)
+
+
+def test_at_rest_a_placement_shows_what_its_variant_alone_shows(built, probed, tmp_path):
+    """Its fixed link's visual in the grouped model and its moving links' in the model
+    of moving parts: the same vertices, where Gazebo puts them, as the variant included
+    alone at the placement's pose (at its scale)."""
+    out, world = built
+    models = {m["name"]: m for m in probed["models"]}
+    for tag, (yaw, enu, lod, scale) in PLACES.items():
+        if tag == "A-3":
+            continue  # drawn by A-1, which it repeats (its moving links are its own: checked above)
+        # its grouped visuals are named `<tag>__...`, its moving links `<tag>__<link>`
+        uses = [(u, m) for m in models.values() for u in m["meshes"] if u["kind"] == "visual"
+                and (u["name"].startswith(tag + "__") or u["link"].startswith(tag + "__"))]
+        ours = np.concatenate([_visual_points([u], np.array(m["world_from_model"]).reshape(4, 4)) for u, m in uses])
+        variant = lod_model_name(ASSET.id, lod)
+        alone = tmp_path / f"{tag}.sdf"
+        pose = " ".join(map(repr, (*enu, 0.0, 0.0, yaw)))
+        alone.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>model://{variant}'
+                         f'</uri><name>{tag}</name><pose>{pose}</pose></include></world></sdf>\n')
+        single = gazebo.probe_world(alone, [out / "models"])["models"][0]
+        place = np.array(single["world_from_model"]).reshape(4, 4)
+        scaled = place @ np.diag([scale, scale, scale, 1.0])  # the include drawn at the placement's scale
+        theirs = _visual_points([u for u in single["meshes"] if u["kind"] == "visual"], scaled)
+        assert len(ours) == len(theirs), tag
+        np.testing.assert_allclose(np.sort(ours, axis=0), np.sort(theirs, axis=0), atol=1e-6, err_msg=tag)
+
+
+def test_a_joint_posed_in_another_frame_is_one_clear_error(tmp_path):
+    from pipeline.errors import UserError
+
+    model = tmp_path / "model.sdf"
+    model.write_text('<?xml version="1.0"?><sdf version="1.9"><model name="m"><link name="base"/><link name="blade"/>'
+                     '<joint name="hinge" type="revolute"><parent>base</parent><child>blade</child>'
+                     '<pose relative_to="base">0 0 1 0 0 0</pose><axis><xyz>0 1 0</xyz></axis></joint>'
+                     '</model></sdf>\n')
+    with pytest.raises(UserError) as caught:
+        world_joints.read_articulation(model)
+    assert caught.value.file == str(model) and caught.value.obj == "hinge" and "'base'" in caught.value.message
+    model.write_text(model.read_text().replace('relative_to="base"', 'relative_to="blade"'))
+    assert world_joints.read_articulation(model).moving == ("blade",)
