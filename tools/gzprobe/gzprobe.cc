@@ -7,7 +7,7 @@
 // gz-sim's server does; model:// URIs resolve through SDF_PATH (sdformat reads it
 // itself). Every distinct mesh file is then loaded by ignition::common::MeshManager in a
 // child process of its own, so a loader crash is a record ("signal": N), not the end of
-// the probe. --physics builds the world in the dartsim plugin the way gz-sim's Physics
+// the probe (forked by a loader process started before the parse: MeshLoader). --physics builds the world in the dartsim plugin the way gz-sim's Physics
 // system does (empty world, models, links, then each collision: meshes through
 // AttachMeshShape, other shapes through ConstructSdfCollision; then the joints) and
 // steps it at 1 ms (physics.cc). --joints lists every JointPositionController of the
@@ -365,6 +365,117 @@ std::string MeshesJson(const std::map<std::string, std::string> &reports)
   return out + "}";
 }
 
+// Forking is cheap from a small process and dear from a large one: the kernel copies
+// the page tables and every page the child touches. A world's parse leaves this process
+// hundreds of MB of sdformat elements, and forking it once per mesh cost 45 s of the
+// sample's 48 s packages probe (30 s of it system time). So the meshes are loaded by a
+// process forked before the parse, which forks its children from its small self: it
+// reads the paths from a pipe and answers with each path's report.
+struct MeshLoader
+{
+  pid_t pid = -1;
+  int paths = -1;    // we write the paths here, then close it
+  int reports = -1;  // it writes "<path bytes> <report bytes>\n<path><report>" per mesh
+};
+
+bool WriteAll(int fd, const std::string &data)
+{
+  size_t done = 0;
+  while (done < data.size())
+  {
+    const ssize_t n = write(fd, data.data() + done, data.size() - done);
+    if (n <= 0) return false;
+    done += static_cast<size_t>(n);
+  }
+  return true;
+}
+
+std::string ReadAll(int fd)
+{
+  std::string data;
+  char buffer[65536];
+  ssize_t n;
+  while ((n = read(fd, buffer, sizeof buffer)) > 0) data.append(buffer, static_cast<size_t>(n));
+  return data;
+}
+
+MeshLoader StartMeshLoader(int jobs)
+{
+  int toLoader[2], fromLoader[2];
+  if (pipe(toLoader) != 0) return {};
+  if (pipe(fromLoader) != 0)
+  {
+    close(toLoader[0]);
+    close(toLoader[1]);
+    return {};
+  }
+  std::cout.flush();
+  std::cerr.flush();
+  const pid_t pid = fork();
+  if (pid == 0)
+  {
+    close(toLoader[1]);
+    close(fromLoader[0]);
+    std::vector<std::string> paths;
+    std::istringstream lines(ReadAll(toLoader[0]));
+    for (std::string line; std::getline(lines, line);)
+      if (!line.empty()) paths.push_back(line);
+    std::string answer;
+    for (const auto &[path, report] : LoadMeshes(paths, jobs))
+      answer += std::to_string(path.size()) + " " + std::to_string(report.size()) + "\n" + path + report;
+    WriteAll(fromLoader[1], answer);
+    _exit(0);
+  }
+  close(toLoader[0]);
+  close(fromLoader[1]);
+  if (pid < 0)
+  {
+    close(toLoader[1]);
+    close(fromLoader[0]);
+    return {};
+  }
+  return {pid, toLoader[1], fromLoader[0]};
+}
+
+// The loader's reports of `paths`; loaded here, forking this process, when the loader
+// could not be started or died (paths hold no newline: they come from our own URIs).
+std::map<std::string, std::string> LoadMeshesWith(MeshLoader &loader, const std::vector<std::string> &paths, int jobs)
+{
+  if (loader.pid < 0) return LoadMeshes(paths, jobs);
+  std::string request;
+  for (const auto &path : paths) request += path + "\n";
+  WriteAll(loader.paths, request);
+  close(loader.paths);
+  const std::string answer = ReadAll(loader.reports);
+  close(loader.reports);
+  int status = 0;
+  waitpid(loader.pid, &status, 0);
+  loader.pid = -1;
+  std::map<std::string, std::string> reports;
+  size_t at = 0;
+  while (at < answer.size())
+  {
+    const size_t newline = answer.find('\n', at);
+    if (newline == std::string::npos) break;
+    size_t pathSize = 0, reportSize = 0;
+    if (std::sscanf(answer.c_str() + at, "%zu %zu", &pathSize, &reportSize) != 2) break;
+    if (newline + 1 + pathSize + reportSize > answer.size()) break;
+    reports[answer.substr(newline + 1, pathSize)] = answer.substr(newline + 1 + pathSize, reportSize);
+    at = newline + 1 + pathSize + reportSize;
+  }
+  if (reports.size() != paths.size()) return LoadMeshes(paths, jobs);
+  return reports;
+}
+
+void StopMeshLoader(MeshLoader &loader)
+{
+  if (loader.pid < 0) return;
+  close(loader.paths);
+  close(loader.reports);
+  waitpid(loader.pid, nullptr, 0);
+  loader.pid = -1;
+}
+
 int MeshCommand(const std::vector<std::string> &paths, int jobs)
 {
   std::cout << "{\"meshes\":" << MeshesJson(LoadMeshes(paths, jobs)) << "}\n";
@@ -389,6 +500,7 @@ bool ParseBounds(const std::string &report, Vec3 &lo, Vec3 &hi)
 
 int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool meshes, bool joints)
 {
+  MeshLoader loader = meshes ? StartMeshLoader(jobs) : MeshLoader{};
   const double rssBefore = CurrentRssMb();
   const auto start = std::chrono::steady_clock::now();
   const double cpuStart = CpuSeconds();
@@ -414,6 +526,7 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
   {
     out << ",\"models\":0}}\n";
     std::cout << out.str();
+    StopMeshLoader(loader);
     return 1;
   }
   uint64_t links = 0, visuals = 0, collisions = 0;
@@ -438,7 +551,7 @@ int WorldCommand(const std::string &file, int jobs, double physicsSeconds, bool 
     for (const auto &model : summaries)
       for (const auto &use : model.meshes)
         if (!use.path.empty()) unique.insert(use.path);
-    reports = LoadMeshes(std::vector<std::string>(unique.begin(), unique.end()), jobs);
+    reports = LoadMeshesWith(loader, std::vector<std::string>(unique.begin(), unique.end()), jobs);
   }
   std::map<std::string, std::pair<Vec3, Vec3>> meshBounds;
   for (const auto &[path, report] : reports)
