@@ -241,12 +241,14 @@ def one_asset_edit(ctx: Context, sources: Path, built: Path, min_r: int, max_r: 
 
 
 def every_asset_geometry_edit(ctx: Context, sources: Path, built: Path, cold_s: float) -> dict:
-    """The geometry edit of `one_asset_edit`, once for every asset the build made, each
-    followed by a rebuild with its asset.toml restored (from the cache). One asset's
+    """The geometry edit of `one_asset_edit`, once for every asset the build made (the
+    first two in quick mode), each followed by a rebuild with its asset.toml restored
+    (from the cache). One asset's
     figure depends on how much of the cold build its own chain is: this is the spread
     over the sample, beside the one asset the edit series repeats."""
     state = json.loads((built / ".state.json").read_text())
     assets = sorted(n.split(":", 1)[1] for n in state["tasks"] if n.startswith("asset:"))
+    assets = assets[:ctx.pick(2, None)]
     per_asset, runs = {}, []
     for asset in assets:
         toml = sources / "assets" / asset / "asset.toml"

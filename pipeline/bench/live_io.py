@@ -255,7 +255,7 @@ def live_io_section(ctx: Context) -> dict:
     peers = _Peers(folder)
     try:
         twin = _to_twin(ctx.sample_build(), ctx.sources, peers, folder, changes=ctx.pick(10, 100))
-        soak = _soak(peers, signals=1000, hz=10.0, seconds=ctx.pick(5.0, 600.0), folder=folder)
+        soak = _soak(peers, signals=1000, hz=10.0, seconds=ctx.pick(2.0, 600.0), folder=folder)
     finally:
         peers.close()
     return {"to_published": twin, "soak": soak}
