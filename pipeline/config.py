@@ -199,6 +199,8 @@ class Site:
     date: str = "2025-03-20"
     description: str = ""
     floorplan_options: FloorplanOptions = FloorplanOptions()
+    # [gazebo] moving_parts: "all" (the switches' joints move in the world) or "none" (drawn at rest)
+    moving_parts: str = "all"
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -319,6 +321,7 @@ def load_site(path: Path, passed: PassedChecks | None = None) -> Site:
             for p in data.get("inspection_points", [])
         ),
         floorplan_options=_floorplan_options(data, path),
+        moving_parts=data.get("gazebo", _defaults(schema("site")["properties"]["gazebo"], {}))["moving_parts"],
         raw=data,
     )
 

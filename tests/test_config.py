@@ -42,6 +42,13 @@ def test_good_site_loads_with_defaults(tmp_path):
     assert site.levels[0].elevation == 48.0
     assert site.natural_ground == 46.0
     assert site.inspection_points[0].position == (1.0, 2.0, 1.6)
+    assert site.moving_parts == "all"  # the Gazebo world's switches move unless the site says not
+
+
+def test_a_site_chooses_whether_the_gazebo_worlds_switches_move(tmp_path):
+    site = config.load_site(write(tmp_path, GOOD_SITE + '[gazebo]\nmoving_parts = "none"\n'))
+    assert site.moving_parts == "none"
+    assert config.load_site(write(tmp_path, GOOD_SITE + "[gazebo]\n")).moving_parts == "all"
 
 
 @pytest.mark.parametrize("mutate, key, words", [
@@ -52,6 +59,9 @@ def test_good_site_loads_with_defaults(tmp_path):
     (lambda s: s.replace('level = "L1"', 'level = "L9"'), "inspection_points[0].level", "not defined"),
     (lambda s: s.replace("[site]", "[site]\nbogus = 1"), "site.bogus", "unknown key"),
     (lambda s: s.replace("elevation = 48.0", "elevation = nan"), "levels[0].elevation", "finite"),
+    (lambda s: s + '[gazebo]\nmoving_parts = "some"\n', "gazebo.moving_parts", "'some' is not one of ['all', 'none']"),
+    (lambda s: s + '[gazebo]\nmoving_parts = false\n', "gazebo.moving_parts", "False is not one of ['all', 'none']"),
+    (lambda s: s + '[gazebo]\nmoving = "none"\n', "gazebo.moving", "unknown key (known: moving_parts)"),
 ])
 def test_site_errors_name_file_and_key(tmp_path, mutate, key, words):
     path = write(tmp_path, mutate(GOOD_SITE))

@@ -22,7 +22,9 @@ sampled peak of the whole tree's RSS):
   mode 2x, and no 1-core cold build), from an empty build folder and cache;
 - the scale run: `twin build` and `twin validate` of a plan drawn as real site plans
   are (plans.at_scale: 5,000 placements, 1,089 of them on one insertion point), assets
-  from the cache; the sizes of the reports and of placements.json;
+  from the cache; the sizes of the reports and of placements.json; its Gazebo world
+  probed with the switches' moving parts and, after site.toml [gazebo] moving_parts =
+  "none" (which reruns the scene side only), without them, one after the other;
 - unique assets: cold builds of plans placing 1..n different assets once each.
 """
 
@@ -37,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import plans
+from . import plans, worlds
 from .context import Context
 from .measure import run_measured
 from .stats import repeat, summarize, summarize_values
@@ -336,30 +338,38 @@ def scale_run(ctx: Context, sources: Path, built: Path, placements: int, piled: 
     summary = large["summary"]
     sizes = {name: (reports / name).stat().st_size for name in ("validation.json", "validation.html", "junit.xml")}
     sizes["placements.json"] = (built / "scene" / "placements.json").stat().st_size
+    moving = _moving_parts_both_ways(ctx, variant, built, large["placements"])
     stacked = _stacked_world(ctx, sources, built, ctx.pick(10, STACKED_PILED))
     run_build(ctx, sources, built, 2, "scale_restore")
     return {"placements": placements, "piled": piled, "build": build, "validate": large["validate"], "bytes": sizes,
             "errors": summary["errors"], "warnings": summary["warnings"], "by_code": summary["by_code"],
-            "sides": {"sample": sample, "scale": large, "stacked": stacked}}
+            "sides": {"sample": sample, "scale": large, **moving, "stacked": stacked}}
+
+
+def _moving_parts_both_ways(ctx: Context, variant: Path, built: Path, count: int) -> dict:
+    """The large plan's world probed as built (the switches on joints: moving_parts
+    "all"), then built again with site.toml [gazebo] moving_parts = "none" and probed:
+    the sides "moving_all" and "moving_none". The site.toml is restored after."""
+    site = variant / "site.toml"
+    original = site.read_bytes()
+    sides = {"moving_all": {"placements": count, "moving_parts": "all", **worlds.probe(ctx, built)}}
+    try:
+        worlds.set_moving_parts(site, "none")
+        r = run_build(ctx, variant, built, 2, "scale_moving_none")
+        if "scene" not in r["ran"] or not set(r["ran"]) <= worlds.SCENE_SIDE:
+            raise BuildFailed(f"[gazebo] moving_parts = \"none\" ran {r['ran']}, not the scene side alone")
+        sides["moving_none"] = {"placements": count, "moving_parts": "none", "build": r, **worlds.probe(ctx, built)}
+    finally:
+        site.write_bytes(original)
+    return sides
 
 
 def _stacked_world(ctx: Context, sources: Path, built: Path, piled: int) -> dict:
     """The sample's plan with `piled` more devices inserted at its first INSERT's
-    point, built in `built`, and its Gazebo world as the probe reads it (parse time,
-    CPU time and memory, dartsim's real-time factor), with the load when it started."""
-    import os
-
-    from ..validate import gazebo
-
+    point, built in `built`, and its Gazebo world as the probe reads it (worlds.probe)."""
     variant = plans.at_scale(sources, ctx.work / "stacked", plans._insert_count(sources) + piled, piled)
     run_build(ctx, variant, built, 2, "stacked")
-    load = os.getloadavg()
-    world = next((built / "scene").glob("*.sdf"))
-    seen = gazebo.probe_world(world, [built / "models"], meshes=False, physics_s=ctx.pick(0.2, 1.0))
-    elements = {k: seen["world"][k] for k in ("models", "links", "visuals", "collisions")}
-    return {"placements": plans._insert_count(variant), "piled": piled, "load_avg": [round(v, 2) for v in load],
-            "world": {k: seen["world"][k] for k in ("parse_s", "parse_cpu_s", "peak_rss_mb") if k in seen["world"]},
-            "physics": seen.get("physics", {}), "elements": elements}
+    return {"placements": plans._insert_count(variant), "piled": piled, **worlds.probe(ctx, built)}
 
 
 def large_plan(ctx: Context, sources: Path, multiple: int, min_r: int, max_r: int, budget: float) -> dict:
@@ -522,19 +532,22 @@ def _scale_row(scale: dict) -> tuple:
 
 
 def _scale_side_rows(scale: dict) -> list[tuple]:
-    """The scale row, the sample's, the large plan's and the stacked plan's side by
-    side: validate time and peak memory (not for the stacked plan, which is only
-    probed), the Gazebo world's parse time (and its CPU time: the machine is shared)
-    and memory and dartsim's wall time per simulated second (1 / real-time factor),
-    each with the load it ran under."""
+    """The scale row, the sample's, the large plan's (validated, then probed with its
+    switches moving and drawn at rest: [gazebo] moving_parts "all" and "none") and the
+    stacked plan's side by side: validate time and peak memory (for the validated
+    ones), the Gazebo world's parse time (and its CPU time: the machine is shared) and
+    memory and dartsim's wall time per simulated second (1 / real-time factor), each
+    with the load it ran under."""
     rows = []
-    for side in ("sample", "scale", "stacked"):
+    for side in ("sample", "scale", "moving_all", "moving_none", "stacked"):
         d = scale.get("sides", {}).get(side)
         if not d:
             continue
         at = f"{d['placements']:,} placements (load {d['load_avg'][0]:.1f})"
         if side == "stacked":
             at = f"{d['placements']:,} placements, {d['piled']:,} at one point (load {d['load_avg'][0]:.1f})"
+        elif side.startswith("moving_"):
+            at = f"{d['placements']:,} placements, moving_parts = \"{d['moving_parts']}\" (load {d['load_avg'][0]:.1f})"
         if "validate" in d:
             rows.append((f"{at}: twin validate under 60 s", d["validate"]["seconds"], 60.0, "s"))
             rows.append((f"{at}: twin validate peak memory under 2 GB (largest process)",
@@ -546,7 +559,7 @@ def _scale_side_rows(scale: dict) -> list[tuple]:
 def _gazebo_rows(at: str, world: dict, physics: dict, elements: dict) -> list[tuple]:
     rows = []
     if "parse_s" in world:
-        counts = ", ".join(f"{elements.get(k, 0):,} {k}" for k in ("visuals", "collisions"))
+        counts = ", ".join(f"{elements[k]:,} {k}" for k in ("joints", "visuals", "collisions") if k in elements)
         cpu = f"; {world['parse_cpu_s']:.1f} s CPU" if "parse_cpu_s" in world else ""
         rows.append((f"{at}: Gazebo world parse under 10 s ({counts}{cpu})", world["parse_s"], 10.0, "s"))
         rows.append((f"{at}: Gazebo world parse under 1.5 GB", world["peak_rss_mb"] / 1000.0, 1.5, "GB"))

@@ -34,6 +34,7 @@ def rows(sections: dict) -> list[dict]:
     out += _gltf_transform_rows(data.get("gltf_transform"))
     out += _render_rows(data.get("render"))
     out += _gazebo_rows(data.get("gazebo"))
+    out += _moving_parts_rows(data.get("scale"))
     out += _viewer_rows(data.get("viewer"))
     out += _dataset_rows(data.get("dataset"))
     out += _live_rows(data.get("live"))
@@ -115,6 +116,30 @@ def _gazebo_rows(d):
                  "one <include> per placement", note),
             _row("gazebo", "world parse time", d["world"]["parse_s"], before["parse_s"], "s",
                  "one <include> per placement", note)]
+
+
+def _moving_parts_rows(d):
+    """The large plan's Gazebo world with its switches on joints ([gazebo] moving_parts
+    "all") against the same world with them drawn at rest ("none"), probed one after
+    the other in the scale section."""
+    sides = (d or {}).get("sides", {})
+    moving, frozen = sides.get("moving_all"), sides.get("moving_none")
+    if not moving or not frozen:
+        return []
+    peer = '[gazebo] moving_parts = "none"'
+    note = (f"ours: \"all\"; {moving['placements']:,} placements (plans.at_scale), "
+            f"{moving['elements'].get('joints', 0):,} joints against {frozen['elements'].get('joints', 0):,}; "
+            f"tools/gzprobe; load {moving['load_avg'][0]:.1f} and {frozen['load_avg'][0]:.1f}")
+    out = [_row("scale", "Gazebo world parse peak memory", moving["world"].get("peak_rss_mb"),
+                frozen["world"].get("peak_rss_mb"), "MB", peer, note),
+           _row("scale", "Gazebo world parse time", moving["world"].get("parse_s"), frozen["world"].get("parse_s"),
+                "s", peer, note),
+           _row("scale", "Gazebo world parse CPU time", moving["world"].get("parse_cpu_s"),
+                frozen["world"].get("parse_cpu_s"), "s", peer, note)]
+    rtf, rtf_peer = moving["physics"].get("real_time_factor"), frozen["physics"].get("real_time_factor")
+    if rtf and rtf_peer:  # wall seconds per simulated second: below 1 is faster than real time
+        out.append(_row("scale", "dartsim (bullet) wall s per simulated s", 1.0 / rtf, 1.0 / rtf_peer, "s", peer, note))
+    return out
 
 
 def _lod_rows(d):

@@ -12,7 +12,9 @@ Gazebo out: after every published step, what changed of the sun (the world's lig
 `twin dataset` poses them) and the bound materials (visual_config, Harmonic) goes to
 gz-sim through tools/gzbridge. A gauge pointer or an oil column is a visual without a
 joint: gz-sim has no request that moves or morphs one, so those are counted as not
-applied, as the SDF applier lists shapes.
+applied, as the SDF applier lists shapes. So are the switches of a world built with
+site.toml [gazebo] moving_parts = "none" (drawn at rest, without joints), as the
+build's placements.json records it: no joint command is sent for them.
 """
 
 from __future__ import annotations
@@ -24,6 +26,9 @@ from ..bridges.feeds import Feeds
 from ..bridges.inputs import read_inputs
 from ..datasets.plan import switch_angles
 from ..runtime.apply_sdf import sun_fragment
+
+# why a switch of a world without moving parts is not applied
+FROZEN = 'switch: the world was built with [gazebo] moving_parts = "none", it has no joint to move'
 
 
 class SignalsIn:
@@ -110,6 +115,9 @@ class GazeboOut:
             self.bridge.sun(light["direction"], level, (level, level, level))
 
     def _switches(self, twin) -> None:
+        if twin.site.moving_parts == "none":
+            self.not_applied.update(f"{tag} ({FROZEN})" for tag in twin.switches.values())
+            return
         for node, tag in sorted(twin.switches.items()):
             position = "open" if twin.engine.values.get((node, "value")) else "closed"
             if self.last.get(("switch", tag)) == position:

@@ -27,6 +27,7 @@ class BuiltSite:
     inspection: dict[str, dict] = field(default_factory=dict)  # name -> {enu, target}
     terrain: str | None = None  # the terrain package (placed at the ENU origin)
     zone: dt.tzinfo | None = None  # site.toml [site] timezone, as site.toml or the build records it
+    moving_parts: str = "all"  # the Gazebo world's switches: "all" move on joints, "none" (placements.json records it)
 
     def placement(self, tag: str) -> dict:
         for p in self.placements:
@@ -70,7 +71,8 @@ def load_site(build: Path, sources: Path) -> BuiltSite:
             manifests[asset] = manifest_io.read(build / "models" / asset)
     o = data["origin"]
     origin = (o["latitude_deg"], o["longitude_deg"], o["height_m"])
-    site = BuiltSite(build, data["placements"], manifests, origin, "2025-03-20")
+    site = BuiltSite(build, data["placements"], manifests, origin, "2025-03-20",
+                     moving_parts=data.get("gazebo", {}).get("moving_parts", "all"))
     if data.get("timezone"):
         site.zone = config.time_zone(data["timezone"], index, "timezone")
     terrain = data.get("terrain")

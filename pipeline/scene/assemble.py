@@ -123,7 +123,8 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
         world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
                         terrain_model=tname, sun=sun, models=models,
                         own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")),
-                        extra_models=() if wires is None else (wires,))
+                        extra_models=() if wires is None else (wires,),
+                        moving_parts=site.moving_parts == "all")
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
                         articulated=frozenset(a for a, m in manifests.items() if m.get("joints")),
@@ -151,9 +152,11 @@ def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hi
     """placements.json: every placement's ENU pose, LOD and distance, and the checks.
     An index for the runtime and for people: lengths to the micrometre, yaw to 1e-9
     rad, heading to 1e-7 degree, distances to the millimetre (the scene files hold the
-    poses in full); a state only where the placement has one."""
+    poses in full); a state only where the placement has one. `gazebo`: what the world
+    was written with ([gazebo] moving_parts), for the live twin, which reads the build
+    and not the sources."""
     return {
-        "site": site.name, "crs": site.crs, "timezone": site.timezone,
+        "site": site.name, "crs": site.crs, "timezone": site.timezone, "gazebo": {"moving_parts": site.moving_parts},
         "origin": {"latitude_deg": origin[0], "longitude_deg": origin[1], "height_m": origin[2]},
         "sun": sun, "terrain": terrain, "lod_histogram": lod_hist,
         "placements": [{

@@ -27,7 +27,10 @@ and groups the rest:
   too, but its grouped model draws its fixed links only, one <visual> `<TAG>__<link>`
   each (names.whole_link_mesh_file); its moving links hang on their joints in a
   non-static model of the variant's moving parts, with a JointPositionController per
-  movable joint listening on the topic the live twin publishes on (world_joints);
+  movable joint listening on the topic the live twin publishes on (world_joints).
+  Under site.toml [gazebo] moving_parts = "none" it is grouped as any other placement
+  (its whole model at rest) and the world holds no joint: at 5,000 placements the moving
+  parts cost sdformat more than the world's 1.5 GB parse budget;
 - in the world, the grouped placements' collisions are not theirs but merged into a
   few cells of ground (world_collisions: `collision_cells`, one mesh shape a cell),
   and a placement that repeats another exactly (the same asset, scale and LOD at the
@@ -72,10 +75,12 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
 
 
 def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terrain_model: str,
-          sun: dict, models: Path, own_model: frozenset[str] = frozenset(), extra_models=()) -> None:
+          sun: dict, models: Path, own_model: frozenset[str] = frozenset(), extra_models=(),
+          moving_parts: bool = True) -> None:
     """models: the folder of the built packages (variants are read from it);
     own_model: asset ids whose placements stay one <include> each; extra_models:
-    lxml <model> elements appended to the world (the conductors)."""
+    lxml <model> elements appended to the world (the conductors); moving_parts: whether
+    the switches' moving links hang on joints (False: drawn whole at rest, no joint)."""
     sdf = etree.Element("sdf", version="1.9")
     world = etree.SubElement(sdf, "world", name=site_name)
     sph = etree.SubElement(world, "spherical_coordinates")
@@ -115,8 +120,9 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         variant = lod_model_name(pl.placement.asset_id, pl.lod)
         if pl.placement.scale != 1.0:
             world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag,
-                                       cells=cells, drawn=drawn))
-            _append_moving(world, Path(models), variant, [pl], pl.placement.tag + world_joints.MODEL_SUFFIX)
+                                       cells=cells, drawn=drawn, moving=moving_parts))
+            if moving_parts:
+                _append_moving(world, Path(models), variant, [pl], pl.placement.tag + world_joints.MODEL_SUFFIX)
         elif pl.placement.asset_id in own_model:
             inc = etree.SubElement(world, "include")
             _text(inc, "uri", f"model://{variant}")
@@ -127,8 +133,10 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         else:
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
-        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, cells=cells, drawn=drawn))
-        _append_moving(world, Path(models), variant, members, variant + world_joints.MODEL_SUFFIX)
+        world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, cells=cells, drawn=drawn,
+                                   moving=moving_parts))
+        if moving_parts:
+            _append_moving(world, Path(models), variant, members, variant + world_joints.MODEL_SUFFIX)
     merged = cells.write(Path(path).parent)
     if merged is not None:
         world.append(merged)
@@ -150,7 +158,7 @@ def _append_moving(world: etree._Element, models: Path, variant: str, members: l
 
 
 def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None,
-                  cells: CollisionCells | None = None, drawn: set | None = None) -> etree._Element:
+                  cells: CollisionCells | None = None, drawn: set | None = None, moving: bool = True) -> etree._Element:
     """One static model (named `name`, default the variant) with one link: per member
     placement a frame named by its TAG at its pose, and what it draws posed relative to
     that frame, at the placement's scale: the package's whole model at the variant's
@@ -159,14 +167,15 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
     a copy of each of the variant's visuals and collisions. A variant with movable
     joints draws its fixed links only, one <visual> `<TAG>__<link>` each (or copies of
     their visuals): its moving links are in its model of moving parts
-    (world_joints.moving_model). `cells`: the world's merged collisions, which take
+    (world_joints.moving_model); with `moving` False it is drawn whole, as any
+    other variant. `cells`: the world's merged collisions, which take
     each member's collision instead when its package has the whole collision mesh.
     `drawn`: the placements already in the world (world_collisions.placement_key),
     shared by every call for one world: a member that repeats one exactly (devices
     piled on one insertion point) is its frame alone, the first one's visual and
     collision standing for both."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
-    art = world_joints.articulation(source)
+    art = world_joints.articulation(source) if moving else None
     source_links = source.findall("link")
     model = etree.Element("model", name=name or variant)
     _text(model, "static", "true")

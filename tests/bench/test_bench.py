@@ -138,7 +138,7 @@ def test_resave_source_changes_bytes_not_content(tmp_path):
                 assert np.array_equal(va.mesh.vertices, vb.mesh.vertices) and np.array_equal(va.mesh.faces, vb.mesh.faces)
 
 
-def test_scale_rows_put_the_sample_the_large_plan_and_the_stacked_one_side_by_side():
+def test_scale_rows_put_the_sample_the_large_plan_both_ways_and_the_stacked_one_side_by_side():
     from pipeline.bench.builds import _scale_side_rows
 
     def side(n, seconds, rss, parse_s, parse_mb, rtf):
@@ -146,25 +146,81 @@ def test_scale_rows_put_the_sample_the_large_plan_and_the_stacked_one_side_by_si
                 "world": {"parse_s": parse_s, "peak_rss_mb": parse_mb}, "physics": {"real_time_factor": rtf},
                 "elements": {"visuals": 10, "collisions": 4}}
 
+    def probed(moving_parts, parse_s, cpu_s, parse_mb, rtf, joints, load):
+        return {"placements": 5000, "moving_parts": moving_parts, "load_avg": [load, 3.0, 2.0],
+                "world": {"parse_s": parse_s, "parse_cpu_s": cpu_s, "peak_rss_mb": parse_mb},
+                "physics": {"real_time_factor": rtf, "real_time_factor_cpu": 2 * rtf},
+                "elements": {"models": 40, "links": 1500, "joints": joints, "visuals": 3000, "collisions": 20}}
+
     stacked = {"placements": 1787, "piled": 1000, "load_avg": [9.0, 3.0, 2.0],
                "world": {"parse_s": 3.6, "parse_cpu_s": 1.3, "peak_rss_mb": 542.0},
                "physics": {"real_time_factor": 6.25, "real_time_factor_cpu": 25.0},
                "elements": {"visuals": 1573, "collisions": 67}}
     rows = _scale_side_rows({"sides": {"sample": side(787, 20.0, 1.0e9, 3.0, 900.0, 2.0),
-                                       "scale": side(5000, 70.0, 2.5e9, 12.0, 2091.0, 0.25), "stacked": stacked}})
+                                       "scale": side(5000, 70.0, 2.5e9, 12.0, 2091.0, 0.25),
+                                       "moving_all": probed("all", 7.4, 6.0, 3600.0, 0.25, 1400, 4.5),
+                                       "moving_none": probed("none", 3.0, 2.5, 1260.0, 8.0, 0, 5.5),
+                                       "stacked": stacked}})
     got = {t: (v, lim) for t, v, lim, _ in rows}
-    assert len(rows) == 13 and sum("(load 3.5)" in t for t in got) == 10
+    assert len(rows) == 19 and sum("(load 3.5)" in t for t in got) == 10
     assert got["787 placements (load 3.5): twin validate under 60 s"] == (20.0, 60.0)
     assert got["5,000 placements (load 3.5): Gazebo world parse under 1.5 GB"] == (2.091, 1.5)
     assert got["5,000 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (4.0, 1.0)
     assert got["787 placements (load 3.5): dartsim (bullet) at real time or faster (wall s per simulated s)"] == (0.5, 1.0)
     assert "10 visuals, 4 collisions" in next(t for t in got if t.startswith("5,000") and "parse under 10 s" in t)
+    # the large plan's world both ways, each row saying which, with its joints and load
+    every = '5,000 placements, moving_parts = "all" (load 4.5)'
+    none = '5,000 placements, moving_parts = "none" (load 5.5)'
+    assert got[f"{every}: Gazebo world parse under 1.5 GB"] == (3.6, 1.5)
+    assert got[f"{none}: Gazebo world parse under 1.5 GB"] == (1.26, 1.5)
+    parse = "Gazebo world parse under 10 s"
+    assert got[f"{every}: {parse} (1,400 joints, 3,000 visuals, 20 collisions; 6.0 s CPU)"] == (7.4, 10.0)
+    assert got[f"{none}: {parse} (0 joints, 3,000 visuals, 20 collisions; 2.5 s CPU)"] == (3.0, 10.0)
+    step = "dartsim (bullet) at real time or faster (wall s per simulated s"
+    assert got[f"{every}: {step}; 2.000 CPU s per simulated s)"] == (4.0, 1.0)
+    assert got[f"{none}: {step}; 0.062 CPU s per simulated s)"] == (0.125, 1.0)
+    assert not any(t.startswith("5,000 placements, moving_parts") and "validate" in t for t in got)
     # the stacked plan is probed, not validated; its CPU times beside the wall times
     at = "1,787 placements, 1,000 at one point (load 9.0)"
     assert not any(t.startswith(at) and "validate" in t for t in got)
     assert got[f"{at}: Gazebo world parse under 10 s (1,573 visuals, 67 collisions; 1.3 s CPU)"] == (3.6, 10.0)
     assert got[f"{at}: dartsim (bullet) at real time or faster (wall s per simulated s; 0.040 CPU s per simulated s)"] \
         == (0.16, 1.0)
+    # the summary: "all" against "none", measured in the same run
+    both = summary.rows({"scale": {"ok": True, "data": {"sides": {
+        "moving_all": probed("all", 7.4, 6.0, 3600.0, 0.25, 1400, 4.5),
+        "moving_none": probed("none", 3.0, 2.5, 1260.0, 8.0, 0, 5.5)}}}})
+    by_metric = {r["metric"]: r for r in both}
+    assert {r["peer_name"] for r in both} == {'[gazebo] moving_parts = "none"'}
+    assert by_metric["Gazebo world parse peak memory"]["ratio"] == pytest.approx(3600.0 / 1260.0)
+    assert by_metric["Gazebo world parse time"]["ours"] == 7.4 and by_metric["Gazebo world parse time"]["peer"] == 3.0
+    assert by_metric["dartsim (bullet) wall s per simulated s"]["ratio"] == pytest.approx(32.0)
+    assert "1,400 joints against 0" in by_metric["Gazebo world parse CPU time"]["note"]
+    assert summary.rows({"scale": {"ok": True, "data": {"sides": {}}}}) == []
+
+
+def test_the_scale_run_writes_its_world_without_moving_parts_by_site_toml(tmp_path):
+    """The edit the scale run makes: [gazebo] moving_parts set, whatever the file holds
+    of [gazebo] already; the rest of site.toml as it was."""
+    import tomllib
+
+    from pipeline.bench.worlds import set_moving_parts
+
+    src = mini_sources.make(tmp_path / "src")
+    site = src / "site.toml"
+    before = tomllib.loads(site.read_text())
+    assert "gazebo" not in before
+    set_moving_parts(site, "none")
+    after = tomllib.loads(site.read_text())
+    assert after.pop("gazebo") == {"moving_parts": "none"} and after == before
+    set_moving_parts(site, "all")
+    assert tomllib.loads(site.read_text())["gazebo"] == {"moving_parts": "all"}
+    site.write_text(site.read_text().replace('moving_parts = "all"', ""))
+    set_moving_parts(site, "none")
+    assert tomllib.loads(site.read_text())["gazebo"] == {"moving_parts": "none"}
+    from pipeline import config
+
+    assert config.load_site(site).moving_parts == "none"
 
 
 def test_the_dataset_section_compares_the_label_pass_before_and_after(tmp_path, monkeypatch):

@@ -94,3 +94,30 @@ def test_the_terrain_reruns_only_when_what_it_is_made_of_changes(tmp_path):
     assert "terrain" in ran(explain(sources, out))
     explain(sources, tmp_path / "clean")
     assert tree_hashes(out) == tree_hashes(tmp_path / "clean")
+
+
+def test_the_gazebo_worlds_moving_parts_rerun_the_scene_side_only(tmp_path):
+    """site.toml [gazebo] moving_parts is read by the scene alone (and by what reads
+    site.toml after it: the viewer and the tiles); no asset, view or terrain reruns,
+    placements.json records the choice for the live twin, and a bad value stops the build
+    with one line naming the file and the key."""
+    from helpers import twin
+
+    sources = mini_sources.make(tmp_path / "sources")
+    out, site = tmp_path / "build", sources / "site.toml"
+    explain(sources, out)
+    record = json.loads((out / "scene" / "placements.json").read_text())
+    assert record["gazebo"] == {"moving_parts": "all"}
+    original = site.read_text()
+
+    site.write_text(original + '\n[gazebo]\nmoving_parts = "none"\n')
+    frozen = explain(sources, out)
+    assert "scene" in ran(frozen) and ran(frozen) <= {"scene", "viewer", "tiles"}
+    assert json.loads((out / "scene" / "placements.json").read_text())["gazebo"] == {"moving_parts": "none"}
+
+    site.write_text(original + '\n[gazebo]\nmoving_parts = "some"\n')
+    before = tree_hashes(out)
+    failed = twin("build", "--sources", sources, "--out", out)
+    assert failed.returncode == 1 and failed.stderr.strip().splitlines()[-1] == (
+        f"error: {site}: gazebo.moving_parts: 'some' is not one of ['all', 'none']")
+    assert tree_hashes(out) == before  # the previous build left as it was

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import pytest
 
 from pipeline.bridges.gazebo import GazeboBridge
+from pipeline.export.names import joint_command_topic
 from pipeline.live.default_scenario import switch_node, switchgear
 from pipeline.live.outside import GazeboOut
 from pipeline.runtime.site import load_site
@@ -71,3 +72,48 @@ def test_every_switch_command_reaches_a_joint_gazebo_moves(sample_build):
         tag = topic.split("/")[2]
         assert c["model"] + "::" + c["child"] in c["moved"]
         assert all(name.startswith(f"{c['model']}::{tag}__") for name in c["moved"])
+
+
+def _switch_build(root, record: dict | None):
+    """A build of two switches (their manifests' revolute joints) whose placements.json
+    records `record` as what the world was written with (None: no record)."""
+    from pipeline.export import manifest as manifest_io
+
+    pkg = root / "models" / "dsw"
+    pkg.mkdir(parents=True)
+    joints = [{"name": "blade", "type": "revolute", "parent": "base", "child": "blade", "lower": 0.0, "upper": 1.5},
+              {"name": "column", "type": "revolute", "parent": "base", "child": "column", "lower": -1.2, "upper": 0.0}]
+    (pkg / manifest_io.MANIFEST).write_text(json.dumps({"category": "switchgear", "joints": joints}))
+    (root / "scene").mkdir()
+    placements = [{"tag": tag, "asset": "dsw", "enu": [float(k), 0.0, 0.0], "yaw_rad": 0.0}
+                  for k, tag in enumerate(("89-1", "89-2"))]
+    (root / "scene" / "placements.json").write_text(json.dumps({
+        "origin": {"latitude_deg": -12.7, "longitude_deg": -38.3, "height_m": 48.0}, "timezone": "America/Bahia",
+        "placements": placements, **({"gazebo": record} if record is not None else {})}))
+    return root
+
+
+def _push_open(build) -> tuple[GazeboOut, list]:
+    site = load_site(build, build / "no-sources")
+    tags = switchgear(site)
+    twin = SimpleNamespace(site=site, switches={switch_node(t): t for t in tags}, wires=None,
+                           engine=SimpleNamespace(values={(switch_node(t), "value"): True for t in tags}))
+    bridge = _Recorded()
+    out = GazeboOut("w", bridge=bridge)
+    out._switches(twin)
+    return out, [line for line in bridge.lines if line[0] == "joint"]
+
+
+def test_a_world_built_without_moving_parts_gets_no_joint_command(tmp_path):
+    """[gazebo] moving_parts = "none", as the build's placements.json records it: no
+    joint command for any switch, each listed as not applied with the setting named;
+    a build that records "all" (or nothing, as before the setting) gets its commands."""
+    out, lines = _push_open(_switch_build(tmp_path / "none", {"moving_parts": "none"}))
+    assert lines == []
+    assert sorted(out.status()["not_applied"]) == [f"{tag} (switch: the world was built with [gazebo] moving_parts"
+                                                   f" = \"none\", it has no joint to move)" for tag in ("89-1", "89-2")]
+    for record in ({"moving_parts": "all"}, None):
+        out, lines = _push_open(_switch_build(tmp_path / f"all-{record is None}", record))
+        assert sorted(lines) == [("joint", joint_command_topic(tag, joint), repr(angle)) for tag in ("89-1", "89-2")
+                                 for joint, angle in (("blade", 1.5), ("column", -1.2))]
+        assert out.status()["not_applied"] == []

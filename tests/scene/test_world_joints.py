@@ -1,7 +1,8 @@
 """The Gazebo world's moving parts (scene.world_joints): each movable joint of a grouped
 placement is a joint of a non-static model that gz-sim's JointPositionController moves,
 listening on the topic the live twin publishes on; dartsim moves its links and nothing
-else; at rest the placement shows what its variant placed alone shows."""
+else; at rest the placement shows what its variant placed alone shows, as it does in a
+world written without moving parts ([gazebo] moving_parts = "none")."""
 
 from __future__ import annotations
 
@@ -36,20 +37,25 @@ def _placed() -> list[Placed]:
             for tag, (yaw, enu, lod, scale) in PLACES.items()]
 
 
+def _write_world(world: Path, models: Path, moving_parts: bool = True) -> Path:
+    """A world of the fixture's four placements (no terrain: no package of it here)."""
+    world.parent.mkdir(exist_ok=True)
+    world_sdf.write(world, site_name="w", origin_llh=(-12.7, -38.3, 48.0), placed=_placed(), terrain_model="none",
+                    sun={"intensity": 1.0, "elevation_deg": 40.0, "azimuth_deg": 30.0}, models=models,
+                    moving_parts=moving_parts)
+    root = etree.parse(str(world), SAFE).getroot()
+    for include in root.iter("include"):
+        include.getparent().remove(include)
+    world.write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8"))
+    return world
+
+
 @pytest.fixture(scope="module")
 def built(tmp_path_factory) -> tuple[Path, Path]:
     """The fixture's package and a world of its four placements (no terrain)."""
     out = tmp_path_factory.mktemp("world_joints")
     write_package(ASSET, out / "models")
-    world = out / "scene" / "w.sdf"
-    world.parent.mkdir()
-    world_sdf.write(world, site_name="w", origin_llh=(-12.7, -38.3, 48.0), placed=_placed(), terrain_model="none",
-                    sun={"intensity": 1.0, "elevation_deg": 40.0, "azimuth_deg": 30.0}, models=out / "models")
-    root = etree.parse(str(world), SAFE).getroot()
-    for include in root.iter("include"):  # the terrain: no package of it here
-        include.getparent().remove(include)
-    world.write_bytes(etree.tostring(root, xml_declaration=True, encoding="UTF-8"))
-    return out, world
+    return out, _write_world(out / "scene" / "w.sdf", out / "models")
 
 
 @pytest.fixture(scope="module")
@@ -155,21 +161,19 @@ def _visual_points(uses: list[dict], world_from_model: np.ndarray) -> np.ndarray
     return np.concatenate(points)
 
 
-def test_at_rest_a_placement_shows_what_its_variant_alone_shows(built, probed, tmp_path):
-    """Its fixed link's visual in the grouped model and its moving links' in the model
-    of moving parts: the same vertices, where Gazebo puts them, as the variant included
-    alone at the placement's pose (at its scale)."""
-    out, world = built
+def _assert_each_placement_shows_its_variant_alone(out: Path, probed: dict, scratch: Path) -> None:
+    """Every placement's visuals (grouped `<TAG>__...`, moving links `<TAG>__<link>`)
+    have the same vertices, where Gazebo puts them, as the variant included alone at the
+    placement's pose (at its scale)."""
     models = {m["name"]: m for m in probed["models"]}
     for tag, (yaw, enu, lod, scale) in PLACES.items():
         if tag == "A-3":
             continue  # drawn by A-1, which it repeats (its moving links are its own: checked above)
-        # its grouped visuals are named `<tag>__...`, its moving links `<tag>__<link>`
         uses = [(u, m) for m in models.values() for u in m["meshes"] if u["kind"] == "visual"
                 and (u["name"].startswith(tag + "__") or u["link"].startswith(tag + "__"))]
         ours = np.concatenate([_visual_points([u], np.array(m["world_from_model"]).reshape(4, 4)) for u, m in uses])
         variant = lod_model_name(ASSET.id, lod)
-        alone = tmp_path / f"{tag}.sdf"
+        alone = scratch / f"{tag}.sdf"
         pose = " ".join(map(repr, (*enu, 0.0, 0.0, yaw)))
         alone.write_text(f'<?xml version="1.0"?><sdf version="1.9"><world name="w"><include><uri>model://{variant}'
                          f'</uri><name>{tag}</name><pose>{pose}</pose></include></world></sdf>\n')
@@ -179,6 +183,48 @@ def test_at_rest_a_placement_shows_what_its_variant_alone_shows(built, probed, t
         theirs = _visual_points([u for u in single["meshes"] if u["kind"] == "visual"], scaled)
         assert len(ours) == len(theirs), tag
         np.testing.assert_allclose(np.sort(ours, axis=0), np.sort(theirs, axis=0), atol=1e-6, err_msg=tag)
+
+
+def test_at_rest_a_placement_shows_what_its_variant_alone_shows(built, probed, tmp_path):
+    """Its fixed link's visual in the grouped model and its moving links' in the model
+    of moving parts."""
+    out, _ = built
+    _assert_each_placement_shows_its_variant_alone(out, probed, tmp_path)
+
+
+def test_a_world_without_moving_parts_draws_each_switch_whole_at_rest(built, tmp_path):
+    """[gazebo] moving_parts = "none": no joint, no controller, no model of moving parts;
+    each placement is drawn by the static grouped model alone, whole and at rest (the
+    world with them, from the same package, has all three)."""
+    out, with_joints = built
+    world = _write_world(tmp_path / "scene" / "w.sdf", out / "models", moving_parts=False)
+    for path, moving in ((with_joints, True), (world, False)):
+        root = etree.parse(str(path), SAFE).getroot()
+        models = root.findall("world/model")
+        assert bool(root.findall(".//joint")) == bool(root.findall(".//plugin")) == moving, path
+        assert any(m.get("name").endswith(world_joints.MODEL_SUFFIX) for m in models) == moving, path
+        assert all(m.findtext("static") == "true" for m in models) != moving, path
+    root = etree.parse(str(world), SAFE).getroot()
+    drawn = {v.get("name") for v in root.iter("visual")}
+    # the whole model as one visual, or at the finest LOD (no whole mesh) a copy of every
+    # link's visuals; A-3 repeats A-1: its frame alone
+    each_visual = {f"{link.name}__{v.name}" for link in ASSET.links for v in link.visuals}
+    assert drawn == {f"{tag}__{name}" for tag, (_, _, lod, _) in PLACES.items() if tag != "A-3"
+                     for name in (each_visual if lod == 0 else {"whole"})}
+    assert {f.get("name") for f in root.iter("frame")} == set(PLACES)
+    if not gazebo.available():
+        if CI:
+            pytest.fail(gazebo.PROBE_HINT)
+        pytest.skip(gazebo.PROBE_HINT)
+    env = dict(os.environ, SDF_PATH=str((out / "models").resolve()))
+    done = subprocess.run([str(gazebo.PROBE), "world", str(world), "--joints", "--physics", "0.05"],
+                          capture_output=True, text=True, env=env, timeout=300, check=False)
+    import json
+
+    probed = json.loads(done.stdout)
+    assert probed["world"]["errors"] == [] and probed["joints"]["controllers"] == []
+    assert probed["physics"]["ok"] and probed["physics"]["joints"] == 0
+    _assert_each_placement_shows_its_variant_alone(out, probed, tmp_path)
 
 
 def test_a_joint_posed_in_another_frame_is_one_clear_error(tmp_path):
