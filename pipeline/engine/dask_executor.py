@@ -9,8 +9,8 @@ its workers must import this package and see the build folder and the sources at
 the same paths as this process (a shared filesystem), since tasks read and write
 those paths themselves.
 
-Workers are recycled between tasks, by dask's own restart of a worker process under
-its nanny (`Worker.close_gracefully(restart=True)`): after `tasks_per_worker` tasks,
+Workers are recycled between tasks: the scheduler retires the worker, which then
+closes and its nanny starts it again (`_leave`): after `tasks_per_worker` tasks,
 or once a task leaves the worker holding more than RECYCLE_SHARE of its memory (what
 no later task frees: Blender's and the allocators' caches, fragmented heaps). The
 worker stops taking tasks before its last one returns, so no task is cut short by a
@@ -114,14 +114,31 @@ async def _pause(worker) -> None:
 
 
 async def _leave(worker) -> None:
-    """A graceful close with a restart, after the client took what this worker holds:
-    results lost with it would be computed again."""
+    """A restart under the nanny, once the client took what this worker holds (results
+    lost with it would be computed again) and the scheduler has retired it.
+
+    The retirement must have happened before the worker goes: a task the scheduler
+    handed it just before the pause reached the scheduler is queued here, and only a
+    retired worker's tasks go elsewhere as if nothing happened. dask's own
+    close_gracefully closes the worker even when the scheduler refused to retire it
+    (results no other worker can take): its queued tasks then count as killed by it,
+    and a build's task fails ("its worker process died") under a loaded machine. A
+    worker the scheduler will not retire within HANDOVER_SECONDS serves on."""
     import asyncio
 
+    from distributed.core import Status
+
     deadline = time.monotonic() + HANDOVER_SECONDS
-    while (worker.state.executing_count or worker.data) and time.monotonic() < deadline:
+    while time.monotonic() < deadline:
+        if not (worker.state.executing_count or worker.data):
+            retired = await worker.scheduler.retire_workers(workers=[worker.address], close_workers=False, remove=True,
+                                                             stimulus_id=f"twin-recycle-{time.time()}")
+            if worker.address in retired:
+                await worker.close(nanny=False, reason="twin: worker recycled")
+                return
         await asyncio.sleep(0.05)
-    await worker.close_gracefully(restart=True, reason="twin: worker recycled")
+    if worker.status == Status.paused:
+        worker.status = Status.running
 
 
 class _Slot:
