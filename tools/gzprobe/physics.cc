@@ -38,17 +38,21 @@ namespace gzprobe
 namespace
 {
 
-using PhysicsFeatures = ignition::physics::FeatureList<
+// What building a world from its SDF takes, as gz-sim's Physics system builds it.
+using BuildFeatures = ignition::physics::FeatureList<
     ignition::physics::sdf::ConstructSdfWorld,
     ignition::physics::sdf::ConstructSdfModel,
     ignition::physics::sdf::ConstructSdfLink,
     ignition::physics::sdf::ConstructSdfCollision,
     ignition::physics::sdf::ConstructSdfJoint,
     ignition::physics::mesh::AttachMeshShapeFeature,
+    ignition::physics::GetModelFromWorld,
+    ignition::physics::GetJointFromModel>;
+
+using PhysicsFeatures = ignition::physics::FeatureList<
+    BuildFeatures,
     ignition::physics::CollisionDetector,
     ignition::physics::ForwardStep,
-    ignition::physics::GetModelFromWorld,
-    ignition::physics::GetJointFromModel,
     ignition::physics::SetJointVelocityCommandFeature>;
 
 // The world's JointPositionControllers that drive their joint by velocity commands
@@ -227,15 +231,8 @@ std::string Physics(const sdf::World &world, double seconds)
 namespace
 {
 using JointFeatures = ignition::physics::FeatureList<
-    ignition::physics::sdf::ConstructSdfWorld,
-    ignition::physics::sdf::ConstructSdfModel,
-    ignition::physics::sdf::ConstructSdfLink,
-    ignition::physics::sdf::ConstructSdfCollision,
-    ignition::physics::sdf::ConstructSdfJoint,
-    ignition::physics::mesh::AttachMeshShapeFeature,
-    ignition::physics::GetModelFromWorld,
+    BuildFeatures,
     ignition::physics::GetLinkFromModel,
-    ignition::physics::GetJointFromModel,
     ignition::physics::SetBasicJointState,
     ignition::physics::LinkFrameSemantics>;
 
