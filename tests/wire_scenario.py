@@ -1,7 +1,7 @@
-"""The scenario fragment the conductor tests share: a conductor_thermal node `wire`
+"""The scenario fragments the conductor tests share: a conductor_thermal node `wire`
 whose current comes from another node's port and whose temperature feeds the render
 node's conductors (render.conductors.temperature), the input every renderer and the
-runtime's conductor appliers read."""
+runtime's conductor appliers read; and a `load` whose current rises with the clock."""
 
 from __future__ import annotations
 
@@ -30,4 +30,21 @@ from = "wire.temperature"
 to = "render.conductors.temperature"
 type = "float"
 unit = "degC"
+"""
+
+
+def rising_load(gain: float, offset: float) -> str:
+    """A `load` node (linear: offset + gain * t amperes, t the clock's seconds) and its
+    edge from the clock, as TOML; its current is `load.y`."""
+    return f"""
+[[nodes]]
+id = "load"
+type = "linear"
+params = {{ gain = {gain!r}, offset = {offset!r}, unit_in = "s", unit_out = "A" }}
+
+[[edges]]
+from = "clock.t"
+to = "load.x"
+type = "float"
+unit = "s"
 """

@@ -5,20 +5,9 @@ strings its spans at (test_conductors_cycles)."""
 from __future__ import annotations
 
 from helpers import SOURCES
-from wire_scenario import thermal_wire
+from wire_scenario import rising_load, thermal_wire
 
-LOAD = """
-[[nodes]]
-id = "load"
-type = "linear"
-params = { gain = 10.0, offset = 300.0, unit_in = "s", unit_out = "A" }
-
-[[edges]]
-from = "clock.t"
-to = "load.x"
-type = "float"
-unit = "s"
-""" + thermal_wire("load.y")
+LOAD = rising_load(10.0, 300.0) + thermal_wire("load.y")
 
 
 def test_a_scenarios_shots_carry_its_conductor_temperature(sample_build, tmp_path):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import mini_sources
-from wire_scenario import thermal_wire
+from wire_scenario import rising_load, thermal_wire
 from pipeline import config, wiring
 from pipeline.builder.run import build
 from pipeline.errors import UserError
@@ -390,20 +390,9 @@ type = "clock"
 period_s = 1.0
 
 [[nodes]]
-id = "load"
-type = "linear"
-params = { gain = 400.0, offset = 200.0, unit_in = "s", unit_out = "A" }
-
-[[nodes]]
 id = "render"
 type = "render"
-
-[[edges]]
-from = "clock.t"
-to = "load.x"
-type = "float"
-unit = "s"
-""" + thermal_wire("load.y", "irradiance_w_m2 = 900.0")
+""" + rising_load(400.0, 200.0) + thermal_wire("load.y", "irradiance_w_m2 = 900.0")
 
 
 def test_sag_follows_the_conductor_temperature_in_a_run(built, tmp_path):
