@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import kit
 import _parts as P
-from lightning_mast import BEVEL_WIDTH, MeshBuilder, tapered_stations
+from lightning_mast import lattice_pedestal
 
 ASSET_ID = "busbar_support"
 
@@ -21,17 +21,8 @@ CLAMP_Z = 7.85                      # busbar axis height
 
 
 def pedestal() -> None:
-    frame = MeshBuilder()
-    frame.lattice(tapered_stations(0.05, PEDESTAL_TOP, BASE_HALF, TOP_HALF, 7),
-                  leg_width=0.06, brace_width=0.04)
-    frame.object("pedestal_lattice", "galvanised_steel", BEVEL_WIDTH)
-    feet = MeshBuilder()
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            x, y = sx * BASE_HALF, sy * BASE_HALF
-            feet.box((x - 0.08, y - 0.08, 0.0), (x + 0.08, y + 0.08, 0.05))
-    feet.object("base_plates", "galvanised_steel")
-    P.box("cap_plate", (0.56, 0.56, 0.03), (0.0, 0.0, PEDESTAL_TOP + 0.015), "galvanised_steel")
+    lattice_pedestal(PEDESTAL_TOP, BASE_HALF, TOP_HALF, 7, leg_width=0.06, brace_width=0.04, foot_half=0.08,
+                     cap_side=0.56, cap_thickness=0.03, cap_z=PEDESTAL_TOP + 0.015)
 
 
 def insulator() -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import kit
 import _parts as P
-from lightning_mast import BEVEL_WIDTH, MeshBuilder, tapered_stations
+from lightning_mast import lattice_pedestal
 
 ASSET_ID = "equipment_support"
 
@@ -21,16 +21,8 @@ BASE_HALF, TOP_HALF = 0.45, 0.3
 
 
 def pedestal() -> None:
-    frame = MeshBuilder()
-    frame.lattice(tapered_stations(0.05, TOP - CAP, BASE_HALF, TOP_HALF, 4), leg_width=0.07, brace_width=0.045)
-    frame.object("pedestal_lattice", "galvanised_steel", BEVEL_WIDTH)
-    feet = MeshBuilder()
-    for sx in (-1, 1):
-        for sy in (-1, 1):
-            x, y = sx * BASE_HALF, sy * BASE_HALF
-            feet.box((x - 0.09, y - 0.09, 0.0), (x + 0.09, y + 0.09, 0.05))
-    feet.object("base_plates", "galvanised_steel")
-    P.box("cap_plate", (2 * TOP_HALF + 0.2, 2 * TOP_HALF + 0.2, CAP), (0.0, 0.0, TOP - CAP / 2), "galvanised_steel")
+    lattice_pedestal(TOP - CAP, BASE_HALF, TOP_HALF, 4, leg_width=0.07, brace_width=0.045, foot_half=0.09,
+                     cap_side=2 * TOP_HALF + 0.2, cap_thickness=CAP, cap_z=TOP - CAP / 2)
 
 
 def main() -> None:

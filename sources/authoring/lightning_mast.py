@@ -99,6 +99,24 @@ def tapered_stations(z0: float, z1: float, half0: float, half1: float, panels: i
             for i, h in enumerate(np.linspace(half0, half1, panels + 1))]
 
 
+def lattice_pedestal(lattice_top: float, base_half: float, top_half: float, panels: int, *, leg_width: float,
+                     brace_width: float, foot_half: float, cap_side: float, cap_thickness: float, cap_z: float) -> None:
+    """A tapered lattice pedestal standing on four base plates (`foot_half` their half
+    side) under a square cap plate centred at `cap_z`: the objects pedestal_lattice,
+    base_plates and cap_plate, galvanised steel."""
+    frame = MeshBuilder()
+    frame.lattice(tapered_stations(0.05, lattice_top, base_half, top_half, panels),
+                  leg_width=leg_width, brace_width=brace_width)
+    frame.object("pedestal_lattice", "galvanised_steel", BEVEL_WIDTH)
+    feet = MeshBuilder()
+    for sx in (-1, 1):
+        for sy in (-1, 1):
+            x, y = sx * base_half, sy * base_half
+            feet.box((x - foot_half, y - foot_half, 0.0), (x + foot_half, y + foot_half, 0.05))
+    feet.object("base_plates", "galvanised_steel")
+    P.box("cap_plate", (cap_side, cap_side, cap_thickness), (0.0, 0.0, cap_z), "galvanised_steel")
+
+
 MAST_TOP = 22.0
 BASE_HALF = 0.68
 TOP_HALF = 0.2
