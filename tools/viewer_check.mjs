@@ -79,10 +79,10 @@ async function main() {
     }
     out.ready_ms = Date.now() - t0;
     out.ready = await page.evaluate(`window.${flag}Ready === true`);
-    // Cesium's render loop keeps SwiftShader's GPU process busy (about a core) even
-    // in requestRenderMode with nothing to draw, and every later step waits behind
-    // it: a screenshot took 15-20 s. Once ready, the loop stops and the page is drawn
-    // once, on request, before the screenshot.
+    // Cesium's render loop keeps SwiftShader's GPU process busy even in
+    // requestRenderMode with nothing to draw, and every later step (the screenshot
+    // most) waits behind it. Once ready, the loop stops and the page is drawn once,
+    // on request, before the screenshot.
     if (o.mode === "globe") await page.evaluate(() => { if (window.twinGlobe) window.twinGlobe.viewer.useDefaultRenderLoop = false; });
     out.stats = await page.evaluate(`window.${flag}Stats`);
     const metrics = Object.fromEntries((await cdp.send("Performance.getMetrics")).metrics.map((m) => [m.name, m.value]));

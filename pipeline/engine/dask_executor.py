@@ -121,9 +121,9 @@ async def _leave(worker) -> None:
     handed it just before the pause reached the scheduler is queued here, and only a
     retired worker's tasks go elsewhere as if nothing happened. dask's own
     close_gracefully closes the worker even when the scheduler refused to retire it
-    (results no other worker can take): its queued tasks then count as killed by it,
-    and a build's task fails ("its worker process died") under a loaded machine. A
-    worker the scheduler will not retire within HANDOVER_SECONDS serves on."""
+    (results no other worker can take): its queued tasks would count as killed by it,
+    and a build's task fails on such a death. A worker the scheduler will not retire
+    within HANDOVER_SECONDS serves on."""
     import asyncio
 
     from distributed.core import Status

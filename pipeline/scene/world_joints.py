@@ -23,15 +23,13 @@ parts that hold, for every placement of the variant:
 
 A model of moving parts holds up to PER_MODEL placements, `<variant>__moving<k>` for
 the k-th run of them in tag order (`<variant>__moving` when one run holds all; a
-scaled placement's is `<TAG>__moving`). sdformat 12 spends
-about 1.4 MB on each <model> of this kind, 0.83 MB on each <link> and 0.56 MB on each
-<joint> it parses, and less than 0.02 MB on a <plugin> (tools/gzprobe, 200 of each),
-so a model per placement would add 1.4 MB to every one. But dartsim makes a model one
+scaled placement's is `<TAG>__moving`). sdformat 12 spends more on a <model> than on
+a <link> and a <joint> together, and little on a <plugin> (tools/gzprobe measures
+each), so a model per placement would cost most. But dartsim makes a model one
 skeleton and solves each skeleton's constraints (the joints' servo and limits) as one
 problem, which grows faster than its joints where they chain (a column carrying a
-blade): 30 vertical-break switches cost 0.67 ms a step in one model, 0.19 ms in one
-model each, 0.26 ms in models of 8 (centre-break switches, two joints side by side,
-0.11 ms for 72 in any grouping; tools/gzprobe --physics on the sample world).
+blade): one model for every switch steps slowest, and models of a few placements step
+about as fast as a model each (tools/gzprobe --physics on the sample world).
 """
 
 from __future__ import annotations

@@ -367,10 +367,10 @@ std::string MeshesJson(const std::map<std::string, std::string> &reports)
 
 // Forking is cheap from a small process and dear from a large one: the kernel copies
 // the page tables and every page the child touches. A world's parse leaves this process
-// hundreds of MB of sdformat elements, and forking it once per mesh cost 45 s of the
-// sample's 48 s packages probe (30 s of it system time). So the meshes are loaded by a
-// process forked before the parse, which forks its children from its small self: it
-// reads the paths from a pipe and answers with each path's report.
+// hundreds of MB of sdformat elements, and forking it once per mesh would spend most of
+// a probe in the kernel. So the meshes are loaded by a process forked before the parse,
+// which forks its children from its small self: it reads the paths from a pipe and
+// answers with each path's report.
 struct MeshLoader
 {
   pid_t pid = -1;
