@@ -330,3 +330,41 @@ def lod_meshes(doc: dict, node_index: int) -> list[int]:
     for i in node.get("extensions", {}).get("MSFT_lod", {}).get("ids", []):
         chain.append(doc["nodes"][i]["mesh"])
     return chain
+
+
+def scene_nodes_only(doc: dict) -> dict:
+    """A copy of `doc` with only the nodes its scenes reach, in their order, renumbered:
+    MSFT_lod's lower levels (nodes outside every scene) go, and the extension with
+    them. Blender's importer makes an object of every node, in a scene or not, and
+    building the lower levels' meshes is most of an import. A document whose
+    animations or skins name nodes comes back unchanged."""
+    if doc.get("animations") or doc.get("skins"):
+        return doc
+    reached: set[int] = set()
+    pending = [r for scene in doc.get("scenes", []) for r in scene.get("nodes", [])]
+    while pending:
+        i = pending.pop()
+        if i not in reached:
+            reached.add(i)
+            pending.extend(doc["nodes"][i].get("children", []))
+    # kept in their order: the importer makes the same objects in the same order
+    index = {i: k for k, i in enumerate(sorted(reached))}
+    nodes = []
+    for i in sorted(reached):
+        node = {k: v for k, v in doc["nodes"][i].items() if k != "extensions"}
+        extensions = {k: v for k, v in doc["nodes"][i].get("extensions", {}).items() if k != "MSFT_lod"}
+        if extensions:
+            node["extensions"] = extensions
+        if "children" in node:
+            node["children"] = [index[c] for c in node["children"]]
+        nodes.append(node)
+    out = {**doc, "nodes": nodes,
+           "scenes": [{**s, "nodes": [index[r] for r in s.get("nodes", [])]} for s in doc.get("scenes", [])]}
+    for key in ("extensionsUsed", "extensionsRequired"):
+        if key in out:
+            kept = [e for e in out[key] if e != "MSFT_lod"]
+            if kept:
+                out[key] = kept
+            else:
+                del out[key]
+    return out

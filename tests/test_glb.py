@@ -286,3 +286,40 @@ def test_usd_takes_the_real_part_first():
     assert np.allclose([reference.GetReal(), *reference.GetImaginary()], ours, atol=1e-12)
     m = Gf.Matrix4d().SetRotate(usd)  # USD's row-vector matrices: the transpose of ours
     assert np.allclose(np.array(m)[:3, :3].T, T.matrix_from_quaternion(ours)[:3, :3], atol=1e-12)
+
+
+# ---------------------------------------------------------------- nodes
+
+def test_scene_nodes_only_drops_the_lower_lods_and_keeps_what_the_scene_draws(mini_build, tmp_path):
+    """A built package without MSFT_lod's out-of-scene levels (what the renderer
+    imports): the same mesh nodes at the same matrices, in the same order, no node
+    outside the scene, and a file the Khronos validator accepts."""
+    from pipeline.validate.external import gltf_validator
+
+    _, out = mini_build
+    packages = sorted(p for p in (out / "models").glob("*/*.glb") if "__lod" not in p.parent.name)
+    lodded = 0
+    for path in packages:
+        doc, binary = glb.read(path)
+        kept = glb.scene_nodes_only(doc)
+        assert [(kept["nodes"][i]["mesh"], m.tolist()) for i, m in glb.visual_nodes(kept)] == \
+            [(doc["nodes"][i]["mesh"], m.tolist()) for i, m in glb.visual_nodes(doc)]
+        drawn = {i for i, _ in glb.visual_nodes(kept)}
+        assert all("mesh" not in n or i in drawn for i, n in enumerate(kept["nodes"]))
+        assert not any("MSFT_lod" in n.get("extensions", {}) for n in kept["nodes"])
+        assert "MSFT_lod" not in kept.get("extensionsUsed", [])
+        if len(kept["nodes"]) < len(doc["nodes"]):
+            lodded += 1
+            glb.write(tmp_path / path.name, kept, binary)
+    assert lodded, "no package of the mini build has lower LODs"
+    results = gltf_validator(sorted(tmp_path.glob("*.glb")))
+    assert results and all(r.status == "passed" for r in results), [(r.target, r.messages) for r in results]
+
+
+def test_scene_nodes_only_keeps_a_document_whose_animations_name_nodes():
+    doc = {**_doc(), "nodes": [{"name": "a"}, {"name": "lower"}],
+           "animations": [{"channels": [{"sampler": 0, "target": {"node": 1, "path": "rotation"}}], "samplers": []}]}
+    assert glb.scene_nodes_only(doc) is doc
+    plain = {**_doc(), "nodes": [{"name": "b", "children": [2]}, {"name": "lower"}, {"name": "c"}],
+             "scenes": [{"nodes": [0]}]}
+    assert glb.scene_nodes_only(plain)["nodes"] == [{"name": "b", "children": [1]}, {"name": "c"}]

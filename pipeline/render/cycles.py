@@ -7,14 +7,13 @@ bpy is imported only when a scene is made: the rest of the renderer runs without
 from __future__ import annotations
 
 import math
-import re
 import shutil
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from .. import sun as sun_model
+from .. import glb as glb_file, sun as sun_model
 from ..perception.gauge import POINTER
 from ..geometry.pinhole import look_at, project
 from .sensor import PhoneCamera
@@ -75,6 +74,7 @@ class CyclesScene:
         self.prototypes: dict[str, str] = {}  # asset -> tag imported first
         self._rest: dict[str, dict[str, object]] = {}  # tag -> link -> rest matrix_basis (set_joints)
         self._hidden: dict[str, bool] = {}  # tag -> hidden from renders, as show_only last set it
+        self._hierarchy: dict[str, list] = {}  # an imported root's name -> it and its descendants, in order
         self.wires: conductors.CyclesWires | None = None  # the spans (load_terrain), always shown
         self._world()
         self._camera()
@@ -170,14 +170,16 @@ class CyclesScene:
     def _import(self, glb: Path):
         bpy = self.bpy
         before = set(bpy.data.objects)
+        # Close-ups draw LOD 0. Blender imports MSFT_lod's out-of-scene nodes as extra
+        # roots at the origin, and building their meshes was three quarters of an
+        # import: the importer reads a copy without them.
+        doc, binary = glb_file.read(glb)
+        scene_only = glb_file.scene_nodes_only(doc)
+        if scene_only is not doc:
+            glb = self.tmp / glb.name
+            glb_file.write(glb, scene_only, binary)
         bpy.ops.import_scene.gltf(filepath=str(glb))
         new = [o for o in bpy.data.objects if o not in before]
-        # Blender imports MSFT_lod's out-of-scene nodes as extra roots at the origin:
-        # close-ups draw LOD 0, so the lower levels go.
-        lower = [o for o in new if LOD_NODE.search(_base_name(o.name))]
-        new = [o for o in new if o not in lower]
-        for o in lower:
-            bpy.data.objects.remove(o, do_unlink=True)
         glass = {m.name for m in {sl.material for o in new for sl in o.material_slots if sl.material is not None}
                  if _tune_material(m)}
         for o in new:
@@ -188,12 +190,14 @@ class CyclesScene:
                 o.visible_shadow = False
         root = next(o for o in new if o.parent is None)
         objs = {_base_name(o.name): o for o in new}
+        # children_recursive walks every object of the scene: once per asset, not per copy
+        self._hierarchy[root.name] = [root, *root.children_recursive]
         return root, objs
 
     def _copy(self, root):
         """Linked duplicate of an imported hierarchy; shape-keyed meshes get own data."""
         mapping = {}
-        for o in [root, *root.children_recursive]:
+        for o in self._hierarchy[root.name]:
             c = o.copy()
             if o.type == "MESH" and o.data.shape_keys is not None:
                 c.data = o.data.copy()
@@ -454,7 +458,6 @@ class CyclesScene:
         return w
 
 
-LOD_NODE = re.compile(r"__lod[1-9][0-9]*$")  # export/gltf.py names lower LODs so
 GLASS_ALPHA_MAX = 0.5  # glTF alpha at or below which a material is a window, not a tint
 
 
