@@ -126,8 +126,7 @@ class CyclesWires:
             span = wires.span(sid)
             origin = np.asarray(span["from"]["enu"], float)
             verts, faces = _tubes(paths, wires.radius(span), origin)
-            mesh = bpy.data.meshes.new(f"conductor:{sid}")
-            mesh.from_pydata(verts.tolist(), [], faces.tolist())
+            mesh = _triangle_mesh(bpy, f"conductor:{sid}", verts, faces)
             mesh.shade_smooth()
             mesh.materials.append(material)
             ob = bpy.data.objects.new(f"conductor:{sid}", mesh)
@@ -152,6 +151,20 @@ class CyclesWires:
         """Each span's object carries its instance id (Cycles' object index)."""
         for sid, ob in self.objects.items():
             ob.pass_index = ids.get(sid, 0)
+
+
+def _triangle_mesh(bpy, name: str, verts: np.ndarray, faces: np.ndarray):
+    """A Blender mesh of triangles: the steps of Mesh.from_pydata, fed from the arrays
+    (its Python lists of every coordinate took most of a site's conductors' second)."""
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(len(verts))
+    mesh.loops.add(3 * len(faces))
+    mesh.polygons.add(len(faces))
+    mesh.vertices.foreach_set("co", np.ascontiguousarray(verts, np.float32).ravel())
+    mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(faces), 3, dtype=np.int32))
+    mesh.polygons.foreach_set("vertices", np.ascontiguousarray(faces, np.int32).ravel())
+    mesh.update(calc_edges=True)
+    return mesh
 
 
 def _tubes(paths: list[np.ndarray], radius: float, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
