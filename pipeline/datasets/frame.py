@@ -108,6 +108,11 @@ def shoot(ctx: dict, plan: FramePlan, labels_as_lights: bool = False) -> dict:
     gain, wb, veil = shot_exposure(scene, shot, linear, cam, lock)
     rgb = develop(linear, gain, veil, wb, cam, seed=plan.seed)
     clip = clipped(linear, gain, veil, wb)
+    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
+    # The pointers as rendered, read while the scene is as evaluated for the render: the
+    # label pass swaps the materials and back, and reading them after it evaluates the
+    # whole scene again (half a second on the sample).
+    pointer_rows = {tag: scene.pointer_rows(tag, shot.cam_pose, k) for tag in plan.oil_levels}
     t2 = time.perf_counter()
     ids, depth, code = scene.render_labels(as_lights=labels_as_lights)
     parts, behind = part_labels.split(code)
@@ -115,8 +120,7 @@ def shoot(ctx: dict, plan: FramePlan, labels_as_lights: bool = False) -> dict:
     behind = np.where(wired != ids, 0, behind).astype(behind.dtype)  # no gauge is seen through a wire
     ids = wired
     t3 = time.perf_counter()
-    k = intrinsics(shot.lens.hfov, cam.width, cam.height)
-    record = _record(ctx, plan, k, ids, depth, gain, wb, float(veil.mean()), clip)
+    record = _record(ctx, plan, k, ids, depth, gain, wb, float(veil.mean()), clip, pointer_rows)
     record["part_annotations"] = part_labels.part_annotations(ids, parts, ctx["tag_of"], behind)
     record["gauge_annotations"] = [a for a in (part_labels.gauge_annotation(ids, parts, ctx["ids"][g["tag"]], g["tag"],
                                                                             g["keypoints"])
@@ -150,7 +154,8 @@ def encode_png(pixels: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def _gauges(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, clip: np.ndarray) -> list:
+def _gauges(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, clip: np.ndarray,
+            pointer_rows: dict) -> list:
     site, shot = ctx["site"], plan.shot
     gauges = []
     for p in site.placements:
@@ -164,7 +169,7 @@ def _gauges(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
             seen["keypoints"] = labels.gauge_keypoints(dial, angle, shot.cam_pose, k, ids, depth, ctx["ids"][p["tag"]])
         # the pointer's rows as posed in this frame: the study's H numerator, true
         if seen["visible"] and angle is not None:
-            seen["pointer_rows_px"] = ctx["scene"].pointer_rows(p["tag"], shot.cam_pose, k)
+            seen["pointer_rows_px"] = pointer_rows[p["tag"]]
             seen.update(labels.pointer_glare(labels.pointer_pixels(dial, angle, shot.cam_pose, k), clip))
         gauges.append({"tag": p["tag"], "reading": reading, "unit": "%",
                        "pointer_angle_deg": None if angle is None else math.degrees(angle), **seen})
@@ -172,7 +177,7 @@ def _gauges(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
 
 
 def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndarray, gain: float,
-            wb: np.ndarray, veil: float, clip: np.ndarray) -> dict:
+            wb: np.ndarray, veil: float, clip: np.ndarray, pointer_rows: dict) -> dict:
     shot, fid = plan.shot, plan.frame_id
     kmat = [[k["fx"], 0.0, k["cx"]], [0.0, k["fy"], k["cy"]], [0.0, 0.0, 1.0]]
     record = {
@@ -189,7 +194,7 @@ def _record(ctx: dict, plan: FramePlan, k: dict, ids: np.ndarray, depth: np.ndar
         "sky": {"tau_atm": plan.tau_atm, "aerosol_density": plan.aerosol},
         "local_time": shot.when.isoformat(),
         "states": {"oil_levels": plan.oil_levels, "switches": plan.switches},
-        "gauges": _gauges(ctx, plan, k, ids, depth, clip),
+        "gauges": _gauges(ctx, plan, k, ids, depth, clip, pointer_rows),
         "instances": int(len(np.unique(ids[ids > 0]))),
         **({"appearance": plan.look} if plan.look is not None else {}),
         "parts": f"parts/{fid}.png", "behind_glass": f"behind_glass/{fid}.png",

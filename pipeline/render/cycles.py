@@ -73,7 +73,8 @@ class CyclesScene:
         self.objects: dict[str, dict[str, object]] = {}  # tag -> visual name -> object
         self.prototypes: dict[str, str] = {}  # asset -> tag imported first
         self._rest: dict[str, dict[str, object]] = {}  # tag -> link -> rest matrix_basis (set_joints)
-        self._hidden: dict[str, bool] = {}  # tag -> hidden from renders, as show_only last set it
+        # tag -> hidden from renders, as imported, copied or last shown (show_only)
+        self._hidden: dict[str, bool] = {}
         self._hierarchy: dict[str, list] = {}  # an imported root's name -> it and its descendants, in order
         self.wires: conductors.CyclesWires | None = None  # the spans (load_terrain), always shown
         self._world()
@@ -147,10 +148,14 @@ class CyclesScene:
         p = self.site.placement(tag)
         glb = self.site.build / "models" / p["asset"] / f"{p['asset']}.glb"
         if p["asset"] in self.prototypes:
-            root, objs = self._copy(self.roots[self.prototypes[p["asset"]]])
+            prototype = self.prototypes[p["asset"]]
+            root, objs = self._copy(self.roots[prototype])
+            if prototype in self._hidden:  # a copy is hidden as its prototype is
+                self._hidden[tag] = self._hidden[prototype]
         else:
             root, objs = self._import(glb)
             self.prototypes[p["asset"]] = tag
+            self._hidden[tag] = False
         root.matrix_world = _matrix(self.bpy, self.site.pose(p))
         # Children's world matrices are stale until the view layer updates; setting one
         # before that would be relative to the parent's old pose.
@@ -163,6 +168,7 @@ class CyclesScene:
         if self.site.terrain and "__terrain__" not in self.roots:
             root, objs = self._import(self.site.build / "models" / self.site.terrain / f"{self.site.terrain}.glb")
             self.roots["__terrain__"], self.objects["__terrain__"] = root, objs
+            self._hidden["__terrain__"] = False
         if self.wires is None:
             wires = conductors.load(self.site.build)
             self.wires = None if wires is None else conductors.CyclesWires(self.bpy, self.scene.collection, wires)
