@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import datetime as dt
+import fnmatch
 import json
 import math
 import tomllib
@@ -119,7 +120,10 @@ def _problems(e) -> list[tuple[str, str]]:
         known = e.schema.get("properties", {})
         return [(within(k), f"unknown key (known: {', '.join(sorted(known))})") for k in sorted(e.instance)
                 if k not in known]
-    typed = [c for c in e.context or () if c.validator != "type"]
+    context = e.context or ()
+    other_type = {c.schema_path[0] for c in context if c.validator == "type"}  # the alternatives of another type
+    typed = [c for c in context if c.validator != "type" and c.schema_path[0] not in other_type] or \
+        [c for c in context if c.validator != "type"]
     if typed:
         return [p for c in typed for p in _problems(c)]
     described = e.schema.get("description") if e.validator == "pattern" else None  # a regex says little
@@ -199,8 +203,9 @@ class Site:
     date: str = "2025-03-20"
     description: str = ""
     floorplan_options: FloorplanOptions = FloorplanOptions()
-    # [gazebo] moving_parts: "all" (the switches' joints move in the world) or "none" (drawn at rest)
-    moving_parts: str = "all"
+    # [gazebo] moving_parts: "all" (the switches' joints move in the world), "none" (drawn at
+    # rest), or tag patterns (the switches that move): moves_in_gazebo
+    moving_parts: str | tuple[str, ...] = "all"
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -321,9 +326,25 @@ def load_site(path: Path, passed: PassedChecks | None = None) -> Site:
             for p in data.get("inspection_points", [])
         ),
         floorplan_options=_floorplan_options(data, path),
-        moving_parts=data.get("gazebo", _defaults(schema("site")["properties"]["gazebo"], {}))["moving_parts"],
+        moving_parts=moving_parts_setting(
+            data.get("gazebo", _defaults(schema("site")["properties"]["gazebo"], {}))["moving_parts"]),
         raw=data,
     )
+
+
+def moving_parts_setting(value: str | list[str]) -> str | tuple[str, ...]:
+    """[gazebo] moving_parts as site.toml or placements.json holds it: "all", "none", or
+    its tag patterns as a tuple."""
+    return value if isinstance(value, str) else tuple(value)
+
+
+def moves_in_gazebo(moving_parts: str | tuple[str, ...], tag: str) -> bool:
+    """Whether placement `tag`'s moving links hang on joints in the Gazebo world: under
+    "all", under "none" never, else when the tag matches one of the patterns
+    (fnmatchcase: `*`, `?` and `[...]`, case-sensitive as tags are)."""
+    if isinstance(moving_parts, str):
+        return moving_parts == "all"
+    return any(fnmatch.fnmatchcase(tag, pattern) for pattern in moving_parts)
 
 
 def _floorplan_options(data: dict, path: Path) -> FloorplanOptions:

@@ -49,6 +49,11 @@ def test_a_site_chooses_whether_the_gazebo_worlds_switches_move(tmp_path):
     site = config.load_site(write(tmp_path, GOOD_SITE + '[gazebo]\nmoving_parts = "none"\n'))
     assert site.moving_parts == "none"
     assert config.load_site(write(tmp_path, GOOD_SITE + "[gazebo]\n")).moving_parts == "all"
+    some = config.load_site(write(tmp_path, GOOD_SITE + '[gazebo]\nmoving_parts = ["Q1-*", "89-[12]"]\n'))
+    assert some.moving_parts == ("Q1-*", "89-[12]")
+    assert [config.moves_in_gazebo(some.moving_parts, t) for t in ("Q1-89", "89-1", "89-3", "q1-89")] == \
+        [True, True, False, False]
+    assert config.moves_in_gazebo("all", "x") and not config.moves_in_gazebo("none", "x")
 
 
 @pytest.mark.parametrize("mutate, key, words", [
@@ -62,6 +67,8 @@ def test_a_site_chooses_whether_the_gazebo_worlds_switches_move(tmp_path):
     (lambda s: s + '[gazebo]\nmoving_parts = "some"\n', "gazebo.moving_parts", "'some' is not one of ['all', 'none']"),
     (lambda s: s + '[gazebo]\nmoving_parts = false\n', "gazebo.moving_parts", "False is not one of ['all', 'none']"),
     (lambda s: s + '[gazebo]\nmoving = "none"\n', "gazebo.moving", "unknown key (known: moving_parts)"),
+    (lambda s: s + '[gazebo]\nmoving_parts = []\n', "gazebo.moving_parts", "[] should be non-empty"),
+    (lambda s: s + '[gazebo]\nmoving_parts = ["Q1-*", ""]\n', "gazebo.moving_parts[1]", "'' should be non-empty"),
 ])
 def test_site_errors_name_file_and_key(tmp_path, mutate, key, words):
     path = write(tmp_path, mutate(GOOD_SITE))

@@ -12,23 +12,28 @@ Gazebo out: after every published step, what changed of the sun (the world's lig
 `twin dataset` poses them) and the bound materials (visual_config, Harmonic) goes to
 gz-sim through tools/gzbridge. A gauge pointer or an oil column is a visual without a
 joint: gz-sim has no request that moves or morphs one, so those are counted as not
-applied, as the SDF applier lists shapes. So are the switches of a world built with
-site.toml [gazebo] moving_parts = "none" (drawn at rest, without joints), as the
-build's placements.json records it: no joint command is sent for them.
+applied, as the SDF applier lists shapes. So are the switches a world was built to
+draw at rest, without joints (site.toml [gazebo] moving_parts = "none", or a list of
+tag patterns that none of theirs matches), as the build's placements.json records
+it: no joint command is sent for them.
 """
 
 from __future__ import annotations
 
 import asyncio
 
-from .. import sun as sun_model
+from .. import config, sun as sun_model
 from ..bridges.feeds import Feeds
 from ..bridges.inputs import read_inputs
 from ..datasets.plan import switch_angles
 from ..runtime.apply_sdf import sun_fragment
 
-# why a switch of a world without moving parts is not applied
-FROZEN = 'switch: the world was built with [gazebo] moving_parts = "none", it has no joint to move'
+
+
+def frozen(moving_parts: str | tuple[str, ...]) -> str:
+    """Why a switch the world draws at rest is not applied."""
+    setting = '"none"' if moving_parts == "none" else f"{list(moving_parts)} (its tag matches none)"
+    return f"switch: the world was built with [gazebo] moving_parts = {setting}, it has no joint to move"
 
 
 class SignalsIn:
@@ -115,10 +120,11 @@ class GazeboOut:
             self.bridge.sun(light["direction"], level, (level, level, level))
 
     def _switches(self, twin) -> None:
-        if twin.site.moving_parts == "none":
-            self.not_applied.update(f"{tag} ({FROZEN})" for tag in twin.switches.values())
-            return
+        moving_parts = twin.site.moving_parts
         for node, tag in sorted(twin.switches.items()):
+            if not config.moves_in_gazebo(moving_parts, tag):
+                self.not_applied.add(f"{tag} ({frozen(moving_parts)})")
+                continue
             position = "open" if twin.engine.values.get((node, "value")) else "closed"
             if self.last.get(("switch", tag)) == position:
                 continue

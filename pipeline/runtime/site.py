@@ -27,7 +27,9 @@ class BuiltSite:
     inspection: dict[str, dict] = field(default_factory=dict)  # name -> {enu, target}
     terrain: str | None = None  # the terrain package (placed at the ENU origin)
     zone: dt.tzinfo | None = None  # site.toml [site] timezone, as site.toml or the build records it
-    moving_parts: str = "all"  # the Gazebo world's switches: "all" move on joints, "none" (placements.json records it)
+    # the Gazebo world's switches: "all" move on joints, "none", or the tag patterns of those
+    # that move (config.moves_in_gazebo; placements.json records it)
+    moving_parts: str | tuple[str, ...] = "all"
 
     def placement(self, tag: str) -> dict:
         for p in self.placements:
@@ -72,7 +74,7 @@ def load_site(build: Path, sources: Path) -> BuiltSite:
     o = data["origin"]
     origin = (o["latitude_deg"], o["longitude_deg"], o["height_m"])
     site = BuiltSite(build, data["placements"], manifests, origin, "2025-03-20",
-                     moving_parts=data.get("gazebo", {}).get("moving_parts", "all"))
+                     moving_parts=config.moving_parts_setting(data.get("gazebo", {}).get("moving_parts", "all")))
     if data.get("timezone"):
         site.zone = config.time_zone(data["timezone"], index, "timezone")
     terrain = data.get("terrain")

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import config, glb
+from ..errors import UserError
 from .. import sun as sun_model
 from ..fork_join import beside
 from ..export import names
@@ -112,6 +113,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     sun = scene_sun(site, origin)
     tname = config.terrain_model_name(site)
 
+    _check_moving_parts(site, placed, manifests)
     lod_hist = {str(k): sum(p.lod == k for p in placed) for k in sorted({p.lod for p in placed})}
     out = Path(staging) / "scene"
     out.mkdir(parents=True, exist_ok=True)
@@ -124,7 +126,7 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
                         terrain_model=tname, sun=sun, models=models,
                         own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")),
                         extra_models=() if wires is None else (wires,),
-                        moving_parts=site.moving_parts == "all")
+                        moves=lambda tag: config.moves_in_gazebo(site.moving_parts, tag))
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
                         articulated=frozenset(a for a, m in manifests.items() if m.get("joints")),
@@ -146,6 +148,22 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     # other) side by side, when a core is spare
     _, finding_count = beside(sdf_and_usd, gltf_checks_and_record)
     return {"placements": len(placed), "lod_histogram": lod_hist, "findings": finding_count, "conductors": len(spans)}
+
+
+def _check_moving_parts(site, placed, manifests: dict) -> None:
+    """Each tag pattern of [gazebo] moving_parts matches a placement with moving parts:
+    one that matches none is a mistake (a typo, a bay renamed), not a choice."""
+    if isinstance(site.moving_parts, str):
+        return
+    switches = sorted(p.placement.tag for p in placed
+                      if any(j["type"] in names.MOVABLE_JOINTS for j in manifests[p.placement.asset_id].get("joints", [])))
+    unmatched = [pattern for pattern in site.moving_parts
+                 if not any(config.moves_in_gazebo((pattern,), tag) for tag in switches)]
+    if unmatched:
+        have = ", ".join(switches[:4]) + (", ..." if len(switches) > 4 else "") if switches else "none"
+        raise UserError(site.path, "gazebo.moving_parts",
+                        f"{', '.join(map(repr, unmatched))} matches no placement with moving parts "
+                        f"({len(switches)} placements have them: {have})")
 
 
 def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hist: dict, findings: list) -> dict:

@@ -44,6 +44,7 @@ and groups the rest:
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -76,11 +77,12 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
 
 def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terrain_model: str,
           sun: dict, models: Path, own_model: frozenset[str] = frozenset(), extra_models=(),
-          moving_parts: bool = True) -> None:
+          moves: Callable[[str], bool] = lambda tag: True) -> None:
     """models: the folder of the built packages (variants are read from it);
     own_model: asset ids whose placements stay one <include> each; extra_models:
-    lxml <model> elements appended to the world (the conductors); moving_parts: whether
-    the switches' moving links hang on joints (False: drawn whole at rest, no joint)."""
+    lxml <model> elements appended to the world (the conductors); moves: whether a
+    placement's moving links (by tag) hang on joints (False: drawn whole at rest, no
+    joint; config.moves_in_gazebo)."""
     sdf = etree.Element("sdf", version="1.9")
     world = etree.SubElement(sdf, "world", name=site_name)
     sph = etree.SubElement(world, "spherical_coordinates")
@@ -120,8 +122,8 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
         variant = lod_model_name(pl.placement.asset_id, pl.lod)
         if pl.placement.scale != 1.0:
             world.append(grouped_model(variant, Path(models) / variant / "model.sdf", [pl], name=pl.placement.tag,
-                                       cells=cells, drawn=drawn, moving=moving_parts))
-            if moving_parts:
+                                       cells=cells, drawn=drawn, moves=moves))
+            if moves(pl.placement.tag):
                 _append_moving(world, Path(models), variant, [pl], pl.placement.tag + world_joints.MODEL_SUFFIX)
         elif pl.placement.asset_id in own_model:
             inc = etree.SubElement(world, "include")
@@ -134,9 +136,10 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
             groups.setdefault(variant, []).append(pl)
     for variant, members in sorted(groups.items()):
         world.append(grouped_model(variant, Path(models) / variant / "model.sdf", members, cells=cells, drawn=drawn,
-                                   moving=moving_parts))
-        if moving_parts:
-            _append_moving(world, Path(models), variant, members, variant + world_joints.MODEL_SUFFIX)
+                                   moves=moves))
+        moving = [pl for pl in members if moves(pl.placement.tag)]
+        if moving:
+            _append_moving(world, Path(models), variant, moving, variant + world_joints.MODEL_SUFFIX)
     merged = cells.write(Path(path).parent)
     if merged is not None:
         world.append(merged)
@@ -158,7 +161,8 @@ def _append_moving(world: etree._Element, models: Path, variant: str, members: l
 
 
 def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: str | None = None,
-                  cells: CollisionCells | None = None, drawn: set | None = None, moving: bool = True) -> etree._Element:
+                  cells: CollisionCells | None = None, drawn: set | None = None,
+                  moves: Callable[[str], bool] = lambda tag: True) -> etree._Element:
     """One static model (named `name`, default the variant) with one link: per member
     placement a frame named by its TAG at its pose, and what it draws posed relative to
     that frame, at the placement's scale: the package's whole model at the variant's
@@ -167,15 +171,15 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
     a copy of each of the variant's visuals and collisions. A variant with movable
     joints draws its fixed links only, one <visual> `<TAG>__<link>` each (or copies of
     their visuals): its moving links are in its model of moving parts
-    (world_joints.moving_model); with `moving` False it is drawn whole, as any
-    other variant. `cells`: the world's merged collisions, which take
+    (world_joints.moving_model); a member that `moves` says stays still is drawn
+    whole, as a placement of any other variant. `cells`: the world's merged collisions, which take
     each member's collision instead when its package has the whole collision mesh.
     `drawn`: the placements already in the world (world_collisions.placement_key),
     shared by every call for one world: a member that repeats one exactly (devices
     piled on one insertion point) is its frame alone, the first one's visual and
     collision standing for both."""
     source = safe_xml.parse(model_sdf, remove_blank_text=True).getroot().find("model")
-    art = world_joints.articulation(source) if moving else None
+    articulated = world_joints.articulation(source)
     source_links = source.findall("link")
     model = etree.Element("model", name=name or variant)
     _text(model, "static", "true")
@@ -183,6 +187,7 @@ def grouped_model(variant: str, model_sdf: Path, members: list[Placed], name: st
     models = Path(model_sdf).parent.parent
     for pl in members:
         tag = pl.placement.tag
+        art = articulated if moves(tag) else None
         x, y, z = pl.pose[:3, 3]
         frame = etree.Element("frame", name=tag, attached_to=GROUPED_LINK)
         _text(frame, "pose", " ".join(fmt(v) for v in (x, y, z, 0.0, 0.0, pl.yaw)))

@@ -99,8 +99,8 @@ def test_the_terrain_reruns_only_when_what_it_is_made_of_changes(tmp_path):
 def test_the_gazebo_worlds_moving_parts_rerun_the_scene_side_only(tmp_path):
     """site.toml [gazebo] moving_parts is read by the scene alone (and by what reads
     site.toml after it: the viewer and the tiles); no asset, view or terrain reruns,
-    placements.json records the choice for the live twin, and a bad value stops the build
-    with one line naming the file and the key."""
+    placements.json records the choice for the live twin, and a bad value or a pattern
+    that selects no switch stops the build with one line naming the file and the key."""
     from helpers import twin
 
     sources = mini_sources.make(tmp_path / "sources")
@@ -121,3 +121,9 @@ def test_the_gazebo_worlds_moving_parts_rerun_the_scene_side_only(tmp_path):
     assert failed.returncode == 1 and failed.stderr.strip().splitlines()[-1] == (
         f"error: {site}: gazebo.moving_parts: 'some' is not one of ['all', 'none']")
     assert tree_hashes(out) == before  # the previous build left as it was
+    # a tag pattern that selects no switch (the mini site has none) is a mistake, said as one
+    site.write_text(original + '\n[gazebo]\nmoving_parts = ["Q1-*"]\n')
+    failed = twin("build", "--sources", sources, "--out", out)
+    assert failed.returncode == 1 and f"error: {site}: gazebo.moving_parts: 'Q1-*' matches no placement with " \
+        "moving parts (0 placements have them: none)" in failed.stderr.splitlines()
+    assert tree_hashes(out) == before

@@ -117,3 +117,14 @@ def test_a_world_built_without_moving_parts_gets_no_joint_command(tmp_path):
         assert sorted(lines) == [("joint", joint_command_topic(tag, joint), repr(angle)) for tag in ("89-1", "89-2")
                                  for joint, angle in (("blade", 1.5), ("column", -1.2))]
         assert out.status()["not_applied"] == []
+
+
+def test_a_world_built_with_some_switches_moving_commands_those_alone(tmp_path):
+    """[gazebo] moving_parts = ["89-2"]: the joint commands of the switch the world moves,
+    and the other listed as not applied, naming the patterns it matches none of."""
+    out, lines = _push_open(_switch_build(tmp_path / "some", {"moving_parts": ["89-2", "Q*"]}))
+    assert sorted(lines) == [("joint", joint_command_topic("89-2", joint), repr(angle))
+                             for joint, angle in (("blade", 1.5), ("column", -1.2))]
+    assert out.status()["not_applied"] == [
+        "89-1 (switch: the world was built with [gazebo] moving_parts = ['89-2', 'Q*'] (its tag matches none), "
+        "it has no joint to move)"]

@@ -17,7 +17,7 @@ import pytest
 from lxml import etree
 
 from fixtures_assets import articulated_asset
-from pipeline import ir
+from pipeline import config, ir
 from pipeline.export.names import MOVABLE_JOINTS, joint_command_topic, lod_model_name
 from pipeline.export.package import write_package
 from pipeline.scene import world_joints, world_sdf
@@ -37,12 +37,13 @@ def _placed() -> list[Placed]:
             for tag, (yaw, enu, lod, scale) in PLACES.items()]
 
 
-def _write_world(world: Path, models: Path, moving_parts: bool = True) -> Path:
-    """A world of the fixture's four placements (no terrain: no package of it here)."""
+def _write_world(world: Path, models: Path, moving_parts: str | tuple[str, ...] = "all") -> Path:
+    """A world of the fixture's four placements (no terrain: no package of it here),
+    their switches moving as site.toml's [gazebo] moving_parts says."""
     world.parent.mkdir(exist_ok=True)
     world_sdf.write(world, site_name="w", origin_llh=(-12.7, -38.3, 48.0), placed=_placed(), terrain_model="none",
                     sun={"intensity": 1.0, "elevation_deg": 40.0, "azimuth_deg": 30.0}, models=models,
-                    moving_parts=moving_parts)
+                    moves=lambda tag: config.moves_in_gazebo(moving_parts, tag))
     root = etree.parse(str(world), SAFE).getroot()
     for include in root.iter("include"):
         include.getparent().remove(include)
@@ -197,7 +198,7 @@ def test_a_world_without_moving_parts_draws_each_switch_whole_at_rest(built, tmp
     each placement is drawn by the static grouped model alone, whole and at rest (the
     world with them, from the same package, has all three)."""
     out, with_joints = built
-    world = _write_world(tmp_path / "scene" / "w.sdf", out / "models", moving_parts=False)
+    world = _write_world(tmp_path / "scene" / "w.sdf", out / "models", moving_parts="none")
     for path, moving in ((with_joints, True), (world, False)):
         root = etree.parse(str(path), SAFE).getroot()
         models = root.findall("world/model")
@@ -225,6 +226,39 @@ def test_a_world_without_moving_parts_draws_each_switch_whole_at_rest(built, tmp
     assert probed["world"]["errors"] == [] and probed["joints"]["controllers"] == []
     assert probed["physics"]["ok"] and probed["physics"]["joints"] == 0
     _assert_each_placement_shows_its_variant_alone(out, probed, tmp_path)
+
+
+def test_a_world_with_some_switches_moving_hangs_those_alone_on_joints(built, tmp_path):
+    """[gazebo] moving_parts = ["A-2", "A-[4]"]: A-2's and A-4's moving links on joints
+    with a controller each, and Gazebo's own loaders find every one in physics; A-1
+    (and A-3, piled on it) drawn whole and at rest in the grouped model, as under "none"."""
+    out, _ = built
+    world = _write_world(tmp_path / "scene" / "w.sdf", out / "models", moving_parts=("A-2", "A-[4]"))
+    root = etree.parse(str(world), SAFE).getroot()
+    moving = [m for m in root.findall("world/model") if world_joints.MODEL_SUFFIX in m.get("name")]
+    topics = {p.findtext("topic") for m in moving for p in m.findall("plugin")}
+    assert topics == {joint_command_topic(tag, j.name) for tag in ("A-2", "A-4") for j in _movable()}
+    assert {link.get("name").split("__")[0] for m in moving for link in m.findall("link")} == {"A-2", "A-4"}
+    drawn = {v.get("name") for m in root.findall("world/model") if m.find("frame") is not None
+             for v in m.iter("visual")}
+    assert {name for name in drawn if name.startswith("A-1__")} == {f"A-1__{link.name}__{v.name}"
+                                                                   for link in ASSET.links for v in link.visuals}
+    assert {name.split("__")[1] for name in drawn if name.startswith(("A-2__", "A-4__"))} == {"base"}
+    if not gazebo.available():
+        if CI:
+            pytest.fail(gazebo.PROBE_HINT)
+        pytest.skip(gazebo.PROBE_HINT)
+    env = dict(os.environ, SDF_PATH=str((out / "models").resolve()))
+    done = subprocess.run([str(gazebo.PROBE), "world", str(world), "--joints", "--physics", "0.05"],
+                          capture_output=True, text=True, env=env, timeout=300, check=False)
+    import json
+
+    probed = json.loads(done.stdout)
+    assert probed["world"]["errors"] == [] and probed["joints"]["joints_failed"] == 0
+    controllers = probed["joints"]["controllers"]
+    assert {c["topic"] for c in controllers} == topics
+    assert all(c["found"] and c["in_physics"] and not c["static"] for c in controllers)
+    assert probed["physics"]["ok"] and probed["physics"]["joints"] == len(topics)
 
 
 def test_a_joint_posed_in_another_frame_is_one_clear_error(tmp_path):
