@@ -178,13 +178,12 @@ def scene_glare(linear_rgb: np.ndarray, gain: float, wb, k: dict, cam: PhoneCame
     spread over the frame by FFT convolution. The halo of in-range light is a fog of a
     few per cent that the exposure absorbs, and the frame cannot see the surroundings
     that would add to it at its edges: it is left out."""
-    from scipy.signal import fftconvolve
-
     lin = np.asarray(linear_rgb, np.float64)
     clip = 1.0 / (gain * np.asarray(wb, np.float64))
     excess = np.maximum(lin - clip, 0.0)
     if not excess.any():
         return np.zeros_like(lin)
+    from scipy.signal import fftconvolve  # a second's import: only for a frame that needs it
     h, w = lin.shape[:2]
     kernel = _kernel(k["cx"], k["cy"], np.arange(-(h - 1), h, dtype=float), np.arange(-(w - 1), w, dtype=float),
                      k, cam) / (k["fx"] * k["fy"])  # per pixel: 1/sr times a pixel's solid angle
@@ -221,13 +220,12 @@ def sun_glare(sun_dir: np.ndarray, dni: float, pose: np.ndarray, k: dict, cam: P
     to the axis; a sun behind the lens plane, set or occluded (dni 0) adds nothing.
 
     sun_dir: (3,) ENU unit vector towards the sun; pose: (4, 4) camera-to-world."""
-    from scipy.signal import fftconvolve
-
     h, w = int(k["height"]), int(k["width"])
     out = np.zeros((h, w))
     cos_axis = float(-(pose[:3, :3].T @ np.asarray(sun_dir, float))[2])
     if not dni > 0.0 or cos_axis <= 0.0:
         return out
+    from scipy.signal import fftconvolve  # a second's import: only for a frame that needs it
     u, v = project(pose[:3, 3][None, :] + np.asarray(sun_dir, float)[None, :], pose, k)[0]
     radius = k["fx"] * math.tan(SUN_HALF_ANGLE)
     half = math.ceil(radius) + 1

@@ -41,6 +41,7 @@ MODEL_BOUNDS_SLACK_M = 1e-4
 # What a world may cost sdformat to parse on a 16 GB laptop that also runs the simulator
 # (issue 24's budget), and how long a user waits for it.
 WORLD_PARSE_BUDGET_MB = 1536.0
+JOINT_PARSE_MB = 1.7  # sdformat 12's parse memory per joint of a switch's moving parts, with its link
 WORLD_PARSE_BUDGET_S = 10.0
 _TIMEOUT_S = 1800
 
@@ -223,14 +224,21 @@ def compare_model_bounds(site: str, probed: list, expected: list, slack_m: float
                     f" the manifest's {np.round(expected, 4).tolist()} by {gap:.4g} m (allowed {slack_m:.4g} m)")]
 
 
-def world_findings(site: str, figures: dict) -> list[Finding]:
-    """sdformat's errors and the parse budget of a world."""
+def world_findings(site: str, figures: dict, joints: int = 0) -> list[Finding]:
+    """sdformat's errors and the parse budget of a world; `joints`: the joints dartsim
+    built (the switches' moving parts), which the budget finding names."""
     out = [finding("GZ007", site, f"sdformat: {message}") for message in figures.get("errors", [])]
     # memory, not time: the parse time follows the machine's load (bench reports it)
     peak = float(figures["peak_rss_mb"])
     if peak > WORLD_PARSE_BUDGET_MB:
+        # the 5,000-placement plan (bench.plans.at_scale): 1,263 MB without moving parts,
+        # 1,366 MB with 60 joints, 3.6 GB with 1,400
+        moving = (f"; its {joints:,} joints (the switches' moving parts) take about {joints * JOINT_PARSE_MB:.0f} MB"
+                  " of it: site.toml "
+                  '[gazebo] moving_parts = "none", or a list of the tags whose switches must move, keeps the '
+                  "others at rest") if joints else ""
         out.append(finding("GZ008", site, f"parsing the world takes {peak:.0f} MB (budget {WORLD_PARSE_BUDGET_MB:.0f} MB;"
-                           f" {figures['parse_s']:.1f} s on this machine now)"))
+                           f" {figures['parse_s']:.1f} s on this machine now){moving}"))
     return out
 
 
@@ -339,7 +347,7 @@ def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path
         figures = {"world": {k: seen["world"][k] for k in ("parse_s", "parse_cpu_s", "peak_rss_mb") if k in seen["world"]},
                    "physics": seen.get("physics", {})}
         world_counts = {k: seen["world"][k] for k in ("models", "links", "visuals", "collisions")}
-        scene += world_findings(world.name, seen["world"])
+        scene += world_findings(world.name, seen["world"], seen.get("physics", {}).get("joints", 0))
         for model in seen.get("models", []):
             for use in model["meshes"]:
                 if not use["path"]:
