@@ -301,8 +301,9 @@ def test_twin_view_without_a_built_viewer_is_one_clear_error(tmp_path):
 # --- in the browser ----------------------------------------------------------------
 
 
-def check_page(build: Path, page: str, shot: Path, script: str | None = None, size=(1280, 800)) -> dict:
-    """pipeline.viewer.check on build/viewer/<page>; skipped without a browser (failed in CI)."""
+def check_page(build: Path, page: str, shot: Path, script: str | None = None, size=(640, 400)) -> dict:
+    """pipeline.viewer.check on build/viewer/<page>; skipped without a browser (failed in CI).
+    SwiftShader draws every pixel on the CPU: a small page is as good a check, and quicker."""
     lacking = check.missing()
     if lacking:
         message = f"missing {', '.join(lacking)}: {check.HINT}"
@@ -534,8 +535,7 @@ def test_sample_in_the_viewer_plays_the_run_as_the_runtime_maps_it(sample):
 
     steps = [0, 30, 60]
     shot = Path(os.environ.get("TWIN_VIEWER_SHOTS", sample)) / "viewer_sample.png"
-    # SwiftShader draws every pixel on the CPU: a small page is as good a check, and quicker
-    result = check_page(sample, "index.html", shot, SAMPLE_SCRIPT % json.dumps(steps), size=(640, 400))
+    result = check_page(sample, "index.html", shot, SAMPLE_SCRIPT % json.dumps(steps))
     assert result["ready"], result
     assert result["page_errors"] == [] and result["stats"]["errors"] == []
     assert result["stats"]["instances"] == result["stats"]["placements"] == 853
