@@ -203,9 +203,10 @@ class Site:
     date: str = "2025-03-20"
     description: str = ""
     floorplan_options: FloorplanOptions = FloorplanOptions()
-    # [gazebo] moving_parts: "all" (the switches' joints move in the world), "none" (drawn at
-    # rest), or tag patterns (the switches that move): moves_in_gazebo
-    moving_parts: str | tuple[str, ...] = "all"
+    # [gazebo] moving_parts: "auto" (all within the world's parse budget, else none), "all"
+    # (the switches' joints move in the world), "none" (drawn at rest), or tag patterns
+    # (the switches that move): moves_in_gazebo
+    moving_parts: str | tuple[str, ...] = "auto"
     raw: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -341,7 +342,10 @@ def moving_parts_setting(value: str | list[str]) -> str | tuple[str, ...]:
 def moves_in_gazebo(moving_parts: str | tuple[str, ...], tag: str) -> bool:
     """Whether placement `tag`'s moving links hang on joints in the Gazebo world: under
     "all", under "none" never, else when the tag matches one of the patterns
-    (fnmatchcase: `*`, `?` and `[...]`, case-sensitive as tags are)."""
+    (fnmatchcase: `*`, `?` and `[...]`, case-sensitive as tags are). "auto" is decided
+    by the scene (scene.world_sdf.write_within_budget), which records what it chose."""
+    if moving_parts == "auto":
+        raise ValueError('moving_parts "auto" is the scene\'s to decide: ask what it recorded')
     if isinstance(moving_parts, str):
         return moving_parts == "all"
     return any(fnmatch.fnmatchcase(tag, pattern) for pattern in moving_parts)

@@ -81,6 +81,8 @@ RULES: dict[str, tuple[str, str, str]] = {
     "GZ009": ("error", "gazebo", "a mesh the world references was not loaded by the probe (missing or unresolved)"),
     "GZ010": ("error", "gazebo", "the COLLADA file's triangles cannot be read (a missing source or a malformed index list)"),
     "GZ011": ("error", "gazebo", "dartsim cannot build the world as gz-sim's Physics system does"),
+    "GZ012": ("warning", "gazebo", "the switches are drawn at rest: their moving parts would take the world over "
+                                   "sdformat's parse budget ([gazebo] moving_parts = \"auto\")"),
 }
 
 # Tolerances, relative to the size of the thing measured so that millimetre parts and

@@ -42,18 +42,20 @@ def test_good_site_loads_with_defaults(tmp_path):
     assert site.levels[0].elevation == 48.0
     assert site.natural_ground == 46.0
     assert site.inspection_points[0].position == (1.0, 2.0, 1.6)
-    assert site.moving_parts == "all"  # the Gazebo world's switches move unless the site says not
+    assert site.moving_parts == "auto"  # the Gazebo world's switches move within its parse budget
 
 
 def test_a_site_chooses_whether_the_gazebo_worlds_switches_move(tmp_path):
     site = config.load_site(write(tmp_path, GOOD_SITE + '[gazebo]\nmoving_parts = "none"\n'))
     assert site.moving_parts == "none"
-    assert config.load_site(write(tmp_path, GOOD_SITE + "[gazebo]\n")).moving_parts == "all"
+    assert config.load_site(write(tmp_path, GOOD_SITE + "[gazebo]\n")).moving_parts == "auto"
     some = config.load_site(write(tmp_path, GOOD_SITE + '[gazebo]\nmoving_parts = ["Q1-*", "89-[12]"]\n'))
     assert some.moving_parts == ("Q1-*", "89-[12]")
     assert [config.moves_in_gazebo(some.moving_parts, t) for t in ("Q1-89", "89-1", "89-3", "q1-89")] == \
         [True, True, False, False]
     assert config.moves_in_gazebo("all", "x") and not config.moves_in_gazebo("none", "x")
+    with pytest.raises(ValueError):  # the scene decides "auto", and records what it chose
+        config.moves_in_gazebo("auto", "x")
 
 
 @pytest.mark.parametrize("mutate, key, words", [
@@ -64,8 +66,8 @@ def test_a_site_chooses_whether_the_gazebo_worlds_switches_move(tmp_path):
     (lambda s: s.replace('level = "L1"', 'level = "L9"'), "inspection_points[0].level", "not defined"),
     (lambda s: s.replace("[site]", "[site]\nbogus = 1"), "site.bogus", "unknown key"),
     (lambda s: s.replace("elevation = 48.0", "elevation = nan"), "levels[0].elevation", "finite"),
-    (lambda s: s + '[gazebo]\nmoving_parts = "some"\n', "gazebo.moving_parts", "'some' is not one of ['all', 'none']"),
-    (lambda s: s + '[gazebo]\nmoving_parts = false\n', "gazebo.moving_parts", "False is not one of ['all', 'none']"),
+    (lambda s: s + '[gazebo]\nmoving_parts = "some"\n', "gazebo.moving_parts", "'some' is not one of ['auto', 'all', 'none']"),
+    (lambda s: s + '[gazebo]\nmoving_parts = false\n', "gazebo.moving_parts", "False is not one of ['auto', 'all', 'none']"),
     (lambda s: s + '[gazebo]\nmoving = "none"\n', "gazebo.moving", "unknown key (known: moving_parts)"),
     (lambda s: s + '[gazebo]\nmoving_parts = []\n', "gazebo.moving_parts", "[] should be non-empty"),
     (lambda s: s + '[gazebo]\nmoving_parts = ["Q1-*", ""]\n', "gazebo.moving_parts[1]", "'' should be non-empty"),

@@ -347,18 +347,20 @@ def scale_run(ctx: Context, sources: Path, built: Path, placements: int, piled: 
 
 
 def _moving_parts_both_ways(ctx: Context, variant: Path, built: Path, count: int) -> dict:
-    """The large plan's world probed as built (the switches on joints: moving_parts
-    "all"), then built again with site.toml [gazebo] moving_parts = "none" and probed:
-    the sides "moving_all" and "moving_none". The site.toml is restored after."""
+    """The large plan's world built again with site.toml [gazebo] moving_parts = "all"
+    (every switch on joints), then "none", each probed: the sides "moving_all" and
+    "moving_none". The site.toml is restored after."""
     site = variant / "site.toml"
     original = site.read_bytes()
-    sides = {"moving_all": {"placements": count, "moving_parts": "all", **worlds.probe(ctx, built)}}
+    sides = {}
     try:
-        worlds.set_moving_parts(site, "none")
-        r = run_build(ctx, variant, built, 2, "scale_moving_none")
-        if "scene" not in r["ran"] or not set(r["ran"]) <= worlds.SCENE_SIDE:
-            raise BuildFailed(f"[gazebo] moving_parts = \"none\" ran {r['ran']}, not the scene side alone")
-        sides["moving_none"] = {"placements": count, "moving_parts": "none", "build": r, **worlds.probe(ctx, built)}
+        for setting in ("all", "none"):
+            worlds.set_moving_parts(site, setting)
+            r = run_build(ctx, variant, built, 2, f"scale_moving_{setting}")
+            if "scene" not in r["ran"] or not set(r["ran"]) <= worlds.SCENE_SIDE:
+                raise BuildFailed(f"[gazebo] moving_parts = \"{setting}\" ran {r['ran']}, not the scene side alone")
+            sides[f"moving_{setting}"] = {"placements": count, "moving_parts": setting, "build": r,
+                                          **worlds.probe(ctx, built)}
     finally:
         site.write_bytes(original)
     return sides

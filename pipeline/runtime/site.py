@@ -27,8 +27,9 @@ class BuiltSite:
     inspection: dict[str, dict] = field(default_factory=dict)  # name -> {enu, target}
     terrain: str | None = None  # the terrain package (placed at the ENU origin)
     zone: dt.tzinfo | None = None  # site.toml [site] timezone, as site.toml or the build records it
-    # the Gazebo world's switches: "all" move on joints, "none", or the tag patterns of those
-    # that move (config.moves_in_gazebo; placements.json records it)
+    # the Gazebo world's switches as the build wrote them: "all" move on joints, "none", or
+    # the tag patterns of those that move (config.moves_in_gazebo; placements.json records
+    # it, "auto" resolved)
     moving_parts: str | tuple[str, ...] = "all"
 
     def placement(self, tag: str) -> dict:

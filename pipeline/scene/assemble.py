@@ -16,6 +16,7 @@ import numpy as np
 
 from .. import config, glb
 from ..errors import UserError
+from ..findings import as_dicts
 from .. import sun as sun_model
 from ..fork_join import beside
 from ..export import names
@@ -122,15 +123,20 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
     conductors.write_record(out / "conductors.json", spans, wiring, sdf_variants=variants)
 
     def sdf_and_usd():
-        world_sdf.write(out / f"{site.name}.sdf", site_name=site.name, origin_llh=origin, placed=placed,
-                        terrain_model=tname, sun=sun, models=models,
-                        own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")),
-                        extra_models=() if wires is None else (wires,),
-                        moves=lambda tag: config.moves_in_gazebo(site.moving_parts, tag))
+        world = out / f"{site.name}.sdf"
+        world_args = dict(site_name=site.name, origin_llh=origin, placed=placed, terrain_model=tname, sun=sun,
+                          models=models, own_model=frozenset(a for a, m in manifests.items() if m.get("bindings")),
+                          extra_models=() if wires is None else (wires,))
+        if site.moving_parts == "auto":
+            chosen, estimate = world_sdf.write_within_budget(world, **world_args)
+        else:
+            world_sdf.write(world, moves=lambda tag: config.moves_in_gazebo(site.moving_parts, tag), **world_args)
+            chosen, estimate = site.moving_parts, None
         stage_usd.write(out / f"{site.name}.usda", site_name=site.name, models=models, origin_llh=origin,
                         crs=site.crs, placed=placed, terrain_model=tname, sun=sun,
                         articulated=frozenset(a for a, m in manifests.items() if m.get("joints")),
                         extra=lambda site_prim: conductor_outputs.add_usd(site_prim, spans))
+        return chosen, estimate
 
     def gltf_checks_and_record():
         scene_gltf.write(out / f"{site.name}.glb", models=models, placed=placed, terrain_model=tname,
@@ -140,14 +146,20 @@ def build_scene(staging: Path, sources: str, build: str) -> dict:
         en = np.array([p.pose[:2, 3] for p in placed]) if placed else np.zeros((0, 2))
         findings = check_placements(site, fp, placed, manifests, height_at(terrain, en))
         findings += _clearance_findings(site, wiring, spans, lambda xy: height_at(terrain, xy))
-        record = _placements_record(site, fp, placed, origin, sun, tname, lod_hist, findings)
-        (out / "placements.json").write_text(_json_by_line(record))
-        return len(findings)
+        return _placements_record(site, fp, placed, origin, sun, tname, lod_hist, findings)
 
     # two halves of about equal cost (USD the largest part of one, glTF of the
     # other) side by side, when a core is spare
-    _, finding_count = beside(sdf_and_usd, gltf_checks_and_record)
-    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": finding_count, "conductors": len(spans)}
+    (chosen, estimate), record = beside(sdf_and_usd, gltf_checks_and_record)
+    # what the world was written with, for the live twin (which reads the build, not the sources)
+    record["gazebo"] = {"moving_parts": chosen}
+    if estimate is not None:
+        record["gazebo"].update(chosen_by="auto", parse_estimate_mb=round(estimate))
+        if chosen == "none":
+            record["findings"].append(as_dicts([world_sdf.at_rest_finding(f"{site.name}.sdf", estimate)])[0])
+    (out / "placements.json").write_text(_json_by_line(record))
+    return {"placements": len(placed), "lod_histogram": lod_hist, "findings": len(record["findings"]),
+            "conductors": len(spans)}
 
 
 def _check_moving_parts(site, placed, manifests: dict) -> None:
@@ -170,11 +182,10 @@ def _placements_record(site, fp, placed, origin, sun: dict, terrain: str, lod_hi
     """placements.json: every placement's ENU pose, LOD and distance, and the checks.
     An index for the runtime and for people: lengths to the micrometre, yaw to 1e-9
     rad, heading to 1e-7 degree, distances to the millimetre (the scene files hold the
-    poses in full); a state only where the placement has one. `gazebo`: what the world
-    was written with ([gazebo] moving_parts), for the live twin, which reads the build
-    and not the sources."""
+    poses in full); a state only where the placement has one. (Its `gazebo`, what the
+    world was written with, is added once the world is.)"""
     return {
-        "site": site.name, "crs": site.crs, "timezone": site.timezone, "gazebo": {"moving_parts": site.moving_parts},
+        "site": site.name, "crs": site.crs, "timezone": site.timezone,
         "origin": {"latitude_deg": origin[0], "longitude_deg": origin[1], "height_m": origin[2]},
         "sun": sun, "terrain": terrain, "lod_histogram": lod_hist,
         "placements": [{

@@ -28,9 +28,11 @@ and groups the rest:
   each (names.whole_link_mesh_file); its moving links hang on their joints in a
   non-static model of the variant's moving parts, with a JointPositionController per
   movable joint listening on the topic the live twin publishes on (world_joints).
-  Under site.toml [gazebo] moving_parts = "none" it is grouped as any other placement
-  (its whole model at rest) and the world holds no joint: at 5,000 placements the moving
-  parts cost sdformat more than the world's 1.5 GB parse budget;
+  Under site.toml [gazebo] moving_parts = "none" (or a list of tag patterns its tag does
+  not match) it is grouped as any other placement (its whole model at rest) and the
+  world holds no joint for it; "auto" (the default) writes every switch moving unless
+  the world would then cost sdformat more than its 1.5 GB parse budget, as at 5,000
+  placements (write_within_budget);
 - in the world, the grouped placements' collisions are not theirs but merged into a
   few cells of ground (world_collisions: `collision_cells`, one mesh shape a cell),
   and a placement that repeats another exactly (the same asset, scale and LOD at the
@@ -51,6 +53,7 @@ import numpy as np
 from lxml import etree
 
 from .. import safe_xml
+from ..findings import Finding, finding
 from ..export.names import WHOLE_COLLISION_FILE, fmt, lod_model_name, whole_mesh_file
 from .placements import Placed
 from . import world_joints
@@ -68,6 +71,10 @@ def _text(parent, tag: str, text) -> etree._Element:
     return el
 
 
+# sdformat's peak memory parsing a world that gz-sim loads on a laptop (validate's GZ008)
+PARSE_BUDGET_MB = 1536.0
+
+
 def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     """Unit vector the sunlight travels along, in ENU (azimuth clockwise from north)."""
     el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
@@ -75,10 +82,51 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     return -to_sun
 
 
-def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terrain_model: str,
+def write(path: Path, **world_args) -> None:
+    """The world (world_element's arguments) in the file `path`."""
+    _save(path, world_element(path, **world_args))
+
+
+def write_within_budget(path: Path, **world_args) -> tuple[str, float]:
+    """site.toml [gazebo] moving_parts = "auto": the world in `path` with every switch's
+    moving parts when sdformat would parse it within PARSE_BUDGET_MB
+    (parse_estimate_mb), else with none. Returns ("all" or "none", the estimate of the
+    world with every switch moving, MB)."""
+    root = world_element(path, moves=lambda tag: True, **world_args)
+    estimate = parse_estimate_mb(root)
+    if estimate > PARSE_BUDGET_MB:
+        root = world_element(path, moves=lambda tag: False, **world_args)
+    _save(path, root)
+    return ("all" if estimate <= PARSE_BUDGET_MB else "none"), estimate
+
+
+def at_rest_finding(world_name: str, estimate_mb: float) -> Finding:
+    """GZ012: moving_parts = "auto" drew every switch at rest, and why."""
+    return finding("GZ012", world_name, f"every switch is drawn at rest, without joints: with its moving parts the "
+                   f"world would cost sdformat about {estimate_mb:.0f} MB to parse (budget {PARSE_BUDGET_MB:.0f} MB); "
+                   'site.toml [gazebo] moving_parts = ["<tag pattern>", ...] moves the switches that must move')
+
+
+def parse_estimate_mb(root: etree._Element) -> float:
+    """The peak memory (MB) of sdformat 12 parsing a world written here, from its count
+    of <visual>s and <joint>s: fitted to tools/gzprobe's figures of the 5,000-placement
+    plan (bench.plans.at_scale) without moving parts (4,999 visuals: 1,263 MB) and with
+    60 joints (1,366 MB), and of the sample with its 212 (1,631 visuals: 812 MB); the
+    plan with all 1,400 of its joints, measured at 3,640 MB, it puts at 3,451 MB."""
+    visuals = sum(1 for _ in root.iter("visual"))
+    joints = sum(1 for _ in root.iter("joint"))
+    return 124.0 + 0.228 * visuals + 1.49 * joints
+
+
+def _save(path: Path, root: etree._Element) -> None:
+    Path(path).write_bytes(etree.tostring(root, pretty_print=True, xml_declaration=True, encoding="UTF-8"))
+
+
+def world_element(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terrain_model: str,
           sun: dict, models: Path, own_model: frozenset[str] = frozenset(), extra_models=(),
-          moves: Callable[[str], bool] = lambda tag: True) -> None:
-    """models: the folder of the built packages (variants are read from it);
+          moves: Callable[[str], bool] = lambda tag: True) -> etree._Element:
+    """The world's <sdf> element; its collision cells are written beside `path`.
+    models: the folder of the built packages (variants are read from it);
     own_model: asset ids whose placements stay one <include> each; extra_models:
     lxml <model> elements appended to the world (the conductors); moves: whether a
     placement's moving links (by tag) hang on joints (False: drawn whole at rest, no
@@ -144,9 +192,8 @@ def write(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terra
     if merged is not None:
         world.append(merged)
     for model in extra_models:
-        world.append(model)
-    data = etree.tostring(sdf, pretty_print=True, xml_declaration=True, encoding="UTF-8")
-    Path(path).write_bytes(data)
+        world.append(copy.deepcopy(model))  # a world made twice (write_within_budget) holds its own
+    return sdf
 
 
 def _append_moving(world: etree._Element, models: Path, variant: str, members: list[Placed], name: str) -> None:

@@ -27,6 +27,7 @@ import numpy as np
 from lxml import etree
 
 from .. import safe_xml
+from ..scene.world_sdf import PARSE_BUDGET_MB
 from ..findings import Finding, finding
 
 PROBE = Path(__file__).resolve().parents[2] / "tools" / "gzprobe" / "gzprobe"
@@ -40,7 +41,7 @@ BOUNDS_TOLERANCE_M = 1e-9
 MODEL_BOUNDS_SLACK_M = 1e-4
 # What a world may cost sdformat to parse on a 16 GB laptop that also runs the simulator
 # (issue 24's budget), and how long a user waits for it.
-WORLD_PARSE_BUDGET_MB = 1536.0
+WORLD_PARSE_BUDGET_MB = PARSE_BUDGET_MB
 JOINT_PARSE_MB = 1.7  # sdformat 12's parse memory per joint of a switch's moving parts, with its link
 WORLD_PARSE_BUDGET_S = 10.0
 _TIMEOUT_S = 1800

@@ -107,7 +107,9 @@ def test_the_gazebo_worlds_moving_parts_rerun_the_scene_side_only(tmp_path):
     out, site = tmp_path / "build", sources / "site.toml"
     explain(sources, out)
     record = json.loads((out / "scene" / "placements.json").read_text())
-    assert record["gazebo"] == {"moving_parts": "all"}
+    # "auto": the world with every switch moving, well within sdformat's parse budget
+    assert record["gazebo"]["moving_parts"] == "all" and record["gazebo"]["chosen_by"] == "auto"
+    assert 0 < record["gazebo"]["parse_estimate_mb"] < 1536
     original = site.read_text()
 
     site.write_text(original + '\n[gazebo]\nmoving_parts = "none"\n')
@@ -119,7 +121,7 @@ def test_the_gazebo_worlds_moving_parts_rerun_the_scene_side_only(tmp_path):
     before = tree_hashes(out)
     failed = twin("build", "--sources", sources, "--out", out)
     assert failed.returncode == 1 and failed.stderr.strip().splitlines()[-1] == (
-        f"error: {site}: gazebo.moving_parts: 'some' is not one of ['all', 'none']")
+        f"error: {site}: gazebo.moving_parts: 'some' is not one of ['auto', 'all', 'none']")
     assert tree_hashes(out) == before  # the previous build left as it was
     # a tag pattern that selects no switch (the mini site has none) is a mistake, said as one
     site.write_text(original + '\n[gazebo]\nmoving_parts = ["Q1-*"]\n')

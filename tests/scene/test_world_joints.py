@@ -261,6 +261,28 @@ def test_a_world_with_some_switches_moving_hangs_those_alone_on_joints(built, tm
     assert probed["physics"]["ok"] and probed["physics"]["joints"] == len(topics)
 
 
+def test_auto_moves_every_switch_within_the_parse_budget_and_none_beyond_it(built, tmp_path, monkeypatch):
+    """[gazebo] moving_parts = "auto" (scene.world_sdf.write_within_budget): the four
+    placements' world, estimated far under 1.5 GB, is the world with every switch
+    moving; under a budget it exceeds, the world with none, byte for byte."""
+    out, with_joints = built
+    args = dict(site_name="w", origin_llh=(-12.7, -38.3, 48.0), placed=_placed(), terrain_model="none",
+                sun={"intensity": 1.0, "elevation_deg": 40.0, "azimuth_deg": 30.0}, models=out / "models")
+    for budget, expected in ((world_sdf.PARSE_BUDGET_MB, "all"), (100.0, "none")):
+        monkeypatch.setattr(world_sdf, "PARSE_BUDGET_MB", budget)
+        auto = tmp_path / expected / "auto.sdf"
+        auto.parent.mkdir()
+        chosen, estimate = world_sdf.write_within_budget(auto, **args)
+        assert chosen == expected
+        root = etree.parse(str(auto), SAFE).getroot()
+        visuals, joints = len(list(root.iter("visual"))), len(list(root.iter("joint")))
+        assert estimate == pytest.approx(124.0 + 0.228 * visuals + 1.49 * joints) if expected == "all" else \
+            estimate > 100.0
+        same = tmp_path / expected / "explicit.sdf"
+        world_sdf.write(same, moves=lambda tag: expected == "all", **args)
+        assert auto.read_bytes() == same.read_bytes()
+
+
 def test_a_joint_posed_in_another_frame_is_one_clear_error(tmp_path):
     from pipeline.errors import UserError
 
@@ -274,3 +296,25 @@ def test_a_joint_posed_in_another_frame_is_one_clear_error(tmp_path):
     assert caught.value.file == str(model) and caught.value.obj == "hinge" and "'base'" in caught.value.message
     model.write_text(model.read_text().replace('relative_to="base"', 'relative_to="blade"'))
     assert world_joints.read_articulation(model).moving == ("blade",)
+
+
+def test_the_scene_records_what_auto_chose_and_warns_when_it_is_none(mini_copy, tmp_path, monkeypatch):
+    """The scene task (in this process) on the mini build under a budget its world
+    exceeds: placements.json records "none", chosen by "auto" with the estimate, and
+    GZ012 among its findings; under the real budget, "all" and no GZ012."""
+    import json
+
+    from pipeline.scene.assemble import build_scene
+
+    src, out = mini_copy
+    for budget, chosen in ((world_sdf.PARSE_BUDGET_MB, "all"), (50.0, "none")):
+        monkeypatch.setattr(world_sdf, "PARSE_BUDGET_MB", budget)
+        staging = tmp_path / f"staging-{chosen}"
+        build_scene(staging, str(src), str(out))
+        record = json.loads((staging / "scene" / "placements.json").read_text())
+        assert record["gazebo"]["moving_parts"] == chosen and record["gazebo"]["chosen_by"] == "auto"
+        assert record["gazebo"]["parse_estimate_mb"] > 50
+        warned = [f for f in record["findings"] if f["code"] == "GZ012"]
+        assert len(warned) == (chosen == "none")
+        if warned:
+            assert warned[0]["severity"] == "warning" and "moving_parts" in warned[0]["message"]

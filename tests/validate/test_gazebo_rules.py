@@ -10,6 +10,7 @@ import pytest
 from fixtures_assets import box_mesh
 from pipeline import ir
 from pipeline.export import collada as collada_writer
+from pipeline.scene import world_sdf
 from pipeline.validate import gazebo
 from pipeline.findings import RULES
 
@@ -52,6 +53,7 @@ FIXTURES = {
     "GZ009": lambda t: gazebo.mesh_findings([_written(t)[0]], {}, str),
     "GZ010": lambda t: gazebo.mesh_findings([_broken(t)], {str(_broken(t)): {"ok": True}}, str),
     "GZ011": lambda t: gazebo.physics_findings("w.sdf", {"ok": True, "failed_shapes": 3}),
+    "GZ012": lambda t: [world_sdf.at_rest_finding("w.sdf", 3670.0)],
 }
 
 
