@@ -306,6 +306,23 @@ map = {{ open = 1.0, closed = 0.0 }}
 
 # --- Gazebo out -----------------------------------------------------------------------
 
+def _lines(proc, n: int, timeout_s: float) -> list[dict]:
+    """`n` JSON lines of `proc`'s stdout, or a failure naming what came once `timeout_s`
+    has passed: a message the simulator never got must fail the test, not hang the suite."""
+    import queue
+    import threading
+
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(line) for line in proc.stdout], daemon=True).start()
+    got, end = [], time.monotonic() + timeout_s
+    while len(got) < n:
+        try:
+            got.append(json.loads(lines.get(timeout=max(0.0, end - time.monotonic()))))
+        except queue.Empty:
+            pytest.fail(f"the simulator printed {len(got)} of {n} messages in {timeout_s:g} s: {got}")
+    return got
+
+
 def test_the_sun_joints_poses_and_materials_reach_gz_sims_transport(tmp_path):
     from pipeline.bridges.gazebo import BRIDGE, GazeboBridge
     from pipeline.export.names import joint_command_topic
@@ -328,7 +345,7 @@ def test_the_sun_joints_poses_and_materials_reach_gz_sims_transport(tmp_path):
             bridge.joint("89-3A", "blade", 1.2345678901234567)
             bridge.pose("RE-A1", pose)
             bridge.visual("RE-A1::tank::oil", (0.9, 0.1, 0.1, 1.0))
-        got = [json.loads(sim.stdout.readline()) for _ in range(4)]
+        got = _lines(sim, 4, timeout_s=60)
     finally:
         sim.terminate()
         sim.wait()

@@ -114,10 +114,17 @@ static int send_mode(const std::string &world, unsigned timeout_ms) {
       transport::Node::Publisher *pub = nullptr;
       for (auto &p : publishers) if (p.first == topic) pub = &p.second;
       if (!pub) {
+        bool answered = false;  // a simulator subscribed to a topic advertised before
+        for (auto &p : publishers) answered = answered || p.second.HasConnections();
+        const bool first = publishers.empty();
         publishers.emplace_back(topic, node.Advertise<msgs::Double>(topic));
         pub = &publishers.back().second;
-        // a new publisher's subscribers are discovered asynchronously: wait for them a little
-        for (int i = 0; i < 50 && !pub->HasConnections(); ++i)
+        // A new publisher's subscribers are discovered asynchronously, and a message
+        // published before that is lost: wait for them, long for the first topic (a
+        // loaded machine takes seconds) or while a simulator answers, briefly once none
+        // answered (a world without the joint's controller, no simulator at all).
+        const int wait_ms = first ? 10000 : answered ? 3000 : 500;
+        for (int i = 0; i < wait_ms / 10 && !pub->HasConnections(); ++i)
           std::this_thread::sleep_for(std::chrono::milliseconds(10));
       }
       msgs::Double value;
