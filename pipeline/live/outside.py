@@ -29,7 +29,6 @@ from ..datasets.plan import switch_angles
 from ..runtime.apply_sdf import sun_fragment
 
 
-
 def frozen(moving_parts: str | tuple[str, ...]) -> str:
     """Why a switch the world draws at rest is not applied."""
     setting = '"none"' if moving_parts == "none" else f"{list(moving_parts)} (its tag matches none)"
