@@ -59,19 +59,24 @@ def built(tmp_path_factory) -> tuple[Path, Path]:
     return out, _write_world(out / "scene" / "w.sdf", out / "models")
 
 
-@pytest.fixture(scope="module")
-def probed(built) -> dict:
+def _probe_joints(out: Path, world: Path) -> dict:
+    """tools/gzprobe's report of `world` (the packages in out/models): its joints and
+    controllers, and a short physics run; skipped without the probe (failed in CI)."""
+    import json
+
     if not gazebo.available():
         if CI:
             pytest.fail(gazebo.PROBE_HINT)
         pytest.skip(gazebo.PROBE_HINT)
-    out, world = built
     env = dict(os.environ, SDF_PATH=str((out / "models").resolve()))
     done = subprocess.run([str(gazebo.PROBE), "world", str(world), "--joints", "--physics", "0.05"],
                           capture_output=True, text=True, env=env, timeout=300, check=False)
-    import json
-
     return json.loads(done.stdout)
+
+
+@pytest.fixture(scope="module")
+def probed(built) -> dict:
+    return _probe_joints(*built)
 
 
 def _movable() -> list[ir.Joint]:
@@ -213,16 +218,7 @@ def test_a_world_without_moving_parts_draws_each_switch_whole_at_rest(built, tmp
     assert drawn == {f"{tag}__{name}" for tag, (_, _, lod, _) in PLACES.items() if tag != "A-3"
                      for name in (each_visual if lod == 0 else {"whole"})}
     assert {f.get("name") for f in root.iter("frame")} == set(PLACES)
-    if not gazebo.available():
-        if CI:
-            pytest.fail(gazebo.PROBE_HINT)
-        pytest.skip(gazebo.PROBE_HINT)
-    env = dict(os.environ, SDF_PATH=str((out / "models").resolve()))
-    done = subprocess.run([str(gazebo.PROBE), "world", str(world), "--joints", "--physics", "0.05"],
-                          capture_output=True, text=True, env=env, timeout=300, check=False)
-    import json
-
-    probed = json.loads(done.stdout)
+    probed = _probe_joints(out, world)
     assert probed["world"]["errors"] == [] and probed["joints"]["controllers"] == []
     assert probed["physics"]["ok"] and probed["physics"]["joints"] == 0
     _assert_each_placement_shows_its_variant_alone(out, probed, tmp_path)
@@ -244,16 +240,7 @@ def test_a_world_with_some_switches_moving_hangs_those_alone_on_joints(built, tm
     assert {name for name in drawn if name.startswith("A-1__")} == {f"A-1__{link.name}__{v.name}"
                                                                    for link in ASSET.links for v in link.visuals}
     assert {name.split("__")[1] for name in drawn if name.startswith(("A-2__", "A-4__"))} == {"base"}
-    if not gazebo.available():
-        if CI:
-            pytest.fail(gazebo.PROBE_HINT)
-        pytest.skip(gazebo.PROBE_HINT)
-    env = dict(os.environ, SDF_PATH=str((out / "models").resolve()))
-    done = subprocess.run([str(gazebo.PROBE), "world", str(world), "--joints", "--physics", "0.05"],
-                          capture_output=True, text=True, env=env, timeout=300, check=False)
-    import json
-
-    probed = json.loads(done.stdout)
+    probed = _probe_joints(out, world)
     assert probed["world"]["errors"] == [] and probed["joints"]["joints_failed"] == 0
     controllers = probed["joints"]["controllers"]
     assert {c["topic"] for c in controllers} == topics
