@@ -29,9 +29,15 @@ from ..datasets.plan import switch_angles
 from ..runtime.apply_sdf import sun_fragment
 
 
-def frozen(moving_parts: str | tuple[str, ...]) -> str:
-    """Why a switch the world draws at rest is not applied."""
-    setting = '"none"' if moving_parts == "none" else f"{list(moving_parts)} (its tag matches none)"
+def frozen(moving_parts: str | tuple[str, ...], chosen_by: str | None = None) -> str:
+    """Why a switch the world draws at rest is not applied (`chosen_by`: "auto" when the
+    build chose the setting itself, placements.json's `gazebo.chosen_by`)."""
+    if moving_parts != "none":
+        setting = f"{list(moving_parts)} (its tag matches none)"
+    elif chosen_by == "auto":
+        setting = '"auto", which chose "none": every switch moving would take the world over its parse budget'
+    else:
+        setting = '"none"'
     return f"switch: the world was built with [gazebo] moving_parts = {setting}, it has no joint to move"
 
 
@@ -122,7 +128,7 @@ class GazeboOut:
         moving_parts = twin.site.moving_parts
         for node, tag in sorted(twin.switches.items()):
             if not config.moves_in_gazebo(moving_parts, tag):
-                self.not_applied.add(f"{tag} ({frozen(moving_parts)})")
+                self.not_applied.add(f"{tag} ({frozen(moving_parts, twin.site.moving_parts_by)})")
                 continue
             position = "open" if twin.engine.values.get((node, "value")) else "closed"
             if self.last.get(("switch", tag)) == position:

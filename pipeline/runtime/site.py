@@ -31,6 +31,7 @@ class BuiltSite:
     # the tag patterns of those that move (config.moves_in_gazebo; placements.json records
     # it, "auto" resolved)
     moving_parts: str | tuple[str, ...] = "all"
+    moving_parts_by: str | None = None  # "auto" when the build chose moving_parts itself
 
     def placement(self, tag: str) -> dict:
         for p in self.placements:
@@ -74,8 +75,10 @@ def load_site(build: Path, sources: Path) -> BuiltSite:
             manifests[asset] = manifest_io.read(build / "models" / asset)
     o = data["origin"]
     origin = (o["latitude_deg"], o["longitude_deg"], o["height_m"])
+    gazebo = data.get("gazebo", {})
     site = BuiltSite(build, data["placements"], manifests, origin, "2025-03-20",
-                     moving_parts=config.moving_parts_setting(data.get("gazebo", {}).get("moving_parts", "all")))
+                     moving_parts=config.moving_parts_setting(gazebo.get("moving_parts", "all")),
+                     moving_parts_by=gazebo.get("chosen_by"))
     if data.get("timezone"):
         site.zone = config.time_zone(data["timezone"], index, "timezone")
     terrain = data.get("terrain")

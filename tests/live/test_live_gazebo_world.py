@@ -128,3 +128,16 @@ def test_a_world_built_with_some_switches_moving_commands_those_alone(tmp_path):
     assert out.status()["not_applied"] == [
         "89-1 (switch: the world was built with [gazebo] moving_parts = ['89-2', 'Q*'] (its tag matches none), "
         "it has no joint to move)"]
+
+
+def test_a_world_auto_built_at_rest_says_auto_chose_it(tmp_path):
+    """moving_parts = "auto" over the parse budget, as placements.json records it: the
+    switches are not applied, and the reason names "auto" rather than a "none" that
+    site.toml does not hold."""
+    record = {"moving_parts": "none", "chosen_by": "auto", "parse_estimate_mb": 3451}
+    out, lines = _push_open(_switch_build(tmp_path / "auto", record))
+    assert lines == []
+    assert sorted(out.status()["not_applied"]) == [
+        f'{tag} (switch: the world was built with [gazebo] moving_parts = "auto", which chose "none": every switch '
+        "moving would take the world over its parse budget, it has no joint to move)" for tag in ("89-1", "89-2")]
+
