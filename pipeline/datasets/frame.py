@@ -111,7 +111,7 @@ def shoot(ctx: dict, plan: FramePlan, labels_as_lights: bool = False) -> dict:
     k = intrinsics(shot.lens.hfov, cam.width, cam.height)
     # The pointers as rendered, read while the scene is as evaluated for the render: the
     # label pass swaps the materials and back, and reading them after it evaluates the
-    # whole scene again (half a second on the sample).
+    # whole scene again.
     pointer_rows = {tag: scene.pointer_rows(tag, shot.cam_pose, k) for tag in plan.oil_levels}
     t2 = time.perf_counter()
     ids, depth, code = scene.render_labels(as_lights=labels_as_lights)

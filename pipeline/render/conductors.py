@@ -155,7 +155,7 @@ class CyclesWires:
 
 def _triangle_mesh(bpy, name: str, verts: np.ndarray, faces: np.ndarray):
     """A Blender mesh of triangles: the steps of Mesh.from_pydata, fed from the arrays
-    (its Python lists of every coordinate took most of a site's conductors' second)."""
+    without its Python list of every coordinate."""
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(verts))
     mesh.loops.add(3 * len(faces))

@@ -150,8 +150,7 @@ class CyclesScene:
         if p["asset"] in self.prototypes:
             prototype = self.prototypes[p["asset"]]
             root, objs = self._copy(self.roots[prototype])
-            if prototype in self._hidden:  # a copy is hidden as its prototype is
-                self._hidden[tag] = self._hidden[prototype]
+            self._hidden[tag] = self._hidden[prototype]  # a copy is hidden as its prototype is
         else:
             root, objs = self._import(glb)
             self.prototypes[p["asset"]] = tag
@@ -177,8 +176,8 @@ class CyclesScene:
         bpy = self.bpy
         before = set(bpy.data.objects)
         # Close-ups draw LOD 0. Blender imports MSFT_lod's out-of-scene nodes as extra
-        # roots at the origin, and building their meshes was three quarters of an
-        # import: the importer reads a copy without them.
+        # roots at the origin, and building their meshes is most of an import: the
+        # importer reads a copy without them.
         doc, binary = glb_file.read(glb)
         scene_only = glb_file.scene_nodes_only(doc)
         if scene_only is not doc:

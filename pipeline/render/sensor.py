@@ -183,7 +183,7 @@ def scene_glare(linear_rgb: np.ndarray, gain: float, wb, k: dict, cam: PhoneCame
     excess = np.maximum(lin - clip, 0.0)
     if not excess.any():
         return np.zeros_like(lin)
-    from scipy.signal import fftconvolve  # a second's import: only for a frame that needs it
+    from scipy.signal import fftconvolve  # a slow import: only for a frame that needs it
     h, w = lin.shape[:2]
     kernel = _kernel(k["cx"], k["cy"], np.arange(-(h - 1), h, dtype=float), np.arange(-(w - 1), w, dtype=float),
                      k, cam) / (k["fx"] * k["fy"])  # per pixel: 1/sr times a pixel's solid angle
@@ -225,7 +225,7 @@ def sun_glare(sun_dir: np.ndarray, dni: float, pose: np.ndarray, k: dict, cam: P
     cos_axis = float(-(pose[:3, :3].T @ np.asarray(sun_dir, float))[2])
     if not dni > 0.0 or cos_axis <= 0.0:
         return out
-    from scipy.signal import fftconvolve  # a second's import: only for a frame that needs it
+    from scipy.signal import fftconvolve  # a slow import: only for a frame that needs it
     u, v = project(pose[:3, 3][None, :] + np.asarray(sun_dir, float)[None, :], pose, k)[0]
     radius = k["fx"] * math.tan(SUN_HALF_ANGLE)
     half = math.ceil(radius) + 1

@@ -73,6 +73,9 @@ def _text(parent, tag: str, text) -> etree._Element:
 
 # sdformat's peak memory parsing a world that gz-sim loads on a laptop (validate's GZ008)
 PARSE_BUDGET_MB = 1536.0
+# sdformat 12's peak parse memory of a world written here, from the <visual>s and <joint>s
+# of its file (parse_estimate_mb); the fit's data are in the commit that set them
+PARSE_MB_BASE, PARSE_MB_PER_VISUAL, PARSE_MB_PER_JOINT = 189.0, 0.266, 1.432
 
 
 def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
@@ -108,14 +111,20 @@ def at_rest_finding(world_name: str, estimate_mb: float) -> Finding:
 
 
 def parse_estimate_mb(root: etree._Element) -> float:
-    """The peak memory (MB) of sdformat 12 parsing a world written here, from its count
-    of <visual>s and <joint>s: fitted to tools/gzprobe's figures of the 5,000-placement
-    plan (bench.plans.at_scale) without moving parts (4,999 visuals: 1,263 MB) and with
-    60 joints (1,366 MB), and of the sample with its 212 (1,631 visuals: 812 MB); the
-    plan with all 1,400 of its joints, measured at 3,640 MB, it puts at 3,451 MB."""
+    """The peak memory (MB) of sdformat 12 parsing a world written here, from the
+    <visual>s and <joint>s of its file: a line fitted to tools/gzprobe's peaks of the
+    sample and of the 5,000-placement plan (bench.plans.at_scale) with none, some and
+    all of its switches moving. The file's own counts, not the parsed world's: those
+    are what the scene has when it chooses."""
     visuals = sum(1 for _ in root.iter("visual"))
     joints = sum(1 for _ in root.iter("joint"))
-    return 124.0 + 0.228 * visuals + 1.49 * joints
+    return PARSE_MB_BASE + PARSE_MB_PER_VISUAL * visuals + PARSE_MB_PER_JOINT * joints
+
+
+def moving_parts_mb(joints: int) -> float:
+    """What `joints` of switches' moving parts add to parse_estimate_mb: each joint's
+    moving link draws one visual (world_joints)."""
+    return joints * (PARSE_MB_PER_JOINT + PARSE_MB_PER_VISUAL)
 
 
 def _save(path: Path, root: etree._Element) -> None:

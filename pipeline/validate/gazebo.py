@@ -27,7 +27,7 @@ import numpy as np
 from lxml import etree
 
 from .. import safe_xml
-from ..scene.world_sdf import PARSE_BUDGET_MB
+from ..scene.world_sdf import PARSE_BUDGET_MB, moving_parts_mb
 from ..findings import Finding, finding
 
 PROBE = Path(__file__).resolve().parents[2] / "tools" / "gzprobe" / "gzprobe"
@@ -42,7 +42,6 @@ MODEL_BOUNDS_SLACK_M = 1e-4
 # What a world may cost sdformat to parse on a 16 GB laptop that also runs the simulator
 # (issue 24's budget), and how long a user waits for it.
 WORLD_PARSE_BUDGET_MB = PARSE_BUDGET_MB
-JOINT_PARSE_MB = 1.7  # sdformat 12's parse memory per joint of a switch's moving parts, with its link
 WORLD_PARSE_BUDGET_S = 10.0
 _TIMEOUT_S = 1800
 
@@ -232,9 +231,7 @@ def world_findings(site: str, figures: dict, joints: int = 0) -> list[Finding]:
     # memory, not time: the parse time follows the machine's load (bench reports it)
     peak = float(figures["peak_rss_mb"])
     if peak > WORLD_PARSE_BUDGET_MB:
-        # the 5,000-placement plan (bench.plans.at_scale): 1,263 MB without moving parts,
-        # 1,366 MB with 60 joints, 3.6 GB with 1,400
-        moving = (f"; its {joints:,} joints (the switches' moving parts) take about {joints * JOINT_PARSE_MB:.0f} MB"
+        moving = (f"; its {joints:,} joints (the switches' moving parts) take about {moving_parts_mb(joints):.0f} MB"
                   " of it: site.toml "
                   '[gazebo] moving_parts = "none", or a list of the tags whose switches must move, keeps the '
                   "others at rest") if joints else ""

@@ -263,7 +263,8 @@ def test_auto_moves_every_switch_within_the_parse_budget_and_none_beyond_it(buil
         assert chosen == expected
         root = etree.parse(str(auto), SAFE).getroot()
         visuals, joints = len(list(root.iter("visual"))), len(list(root.iter("joint")))
-        assert estimate == pytest.approx(124.0 + 0.228 * visuals + 1.49 * joints) if expected == "all" else \
+        assert estimate == pytest.approx(world_sdf.PARSE_MB_BASE + world_sdf.PARSE_MB_PER_VISUAL * visuals
+                                         + world_sdf.PARSE_MB_PER_JOINT * joints) if expected == "all" else \
             estimate > 100.0
         same = tmp_path / expected / "explicit.sdf"
         world_sdf.write(same, moves=lambda tag: expected == "all", **args)

@@ -83,7 +83,7 @@ def test_a_world_over_its_parse_budget_with_moving_parts_names_the_setting():
     """The 5,000-placement plan's world with its 1,400 joints: the finding says what
     they cost and which site.toml setting keeps the switches at rest."""
     (found,) = gazebo.world_findings("w.sdf", {"errors": [], "peak_rss_mb": 3640.0, "parse_s": 16.2}, joints=1400)
-    assert found.code == "GZ008" and "its 1,400 joints (the switches' moving parts) take about 2380 MB" in found.message
+    assert found.code == "GZ008" and "its 1,400 joints (the switches' moving parts) take about 2377 MB" in found.message
     assert '[gazebo] moving_parts = "none", or a list of the tags' in found.message
     (bare,) = gazebo.world_findings("w.sdf", {"errors": [], "peak_rss_mb": 3640.0, "parse_s": 16.2})
     assert "joints" not in bare.message

@@ -560,7 +560,7 @@ def test_sample_in_the_viewer_plays_the_run_as_the_runtime_maps_it(sample):
 @pytest.mark.slow
 def test_sample_tiles_land_at_the_site_on_the_globe(sample):
     shot = Path(os.environ.get("TWIN_VIEWER_SHOTS", sample)) / "globe_sample.png"
-    result = check_page(sample, "globe.html", shot, size=(800, 500))  # 44 points picked at 40 px steps (116 at 1280x800)
+    result = check_page(sample, "globe.html", shot, size=(800, 500))  # the site under 20 or more of its 40 px picks
     assert result["ready"], result
     record = json.loads((sample / "scene" / "placements.json").read_text())
     o = record["origin"]
