@@ -77,6 +77,7 @@ class CyclesScene:
         self._hidden: dict[str, bool] = {}
         self._hierarchy: dict[str, list] = {}  # an imported root's name -> it and its descendants, in order
         self.wires: conductors.CyclesWires | None = None  # the spans (load_terrain), always shown
+        self._frame_image = None  # the rendered file as Blender reads it (render)
         self._world()
         self._camera()
         self.tmp = Path(tempfile.mkdtemp(prefix="twin_render_"))
@@ -312,11 +313,17 @@ class CyclesScene:
         path = self.tmp / "frame.exr"
         s.render.filepath = str(path)
         bpy.ops.render.render(write_still=True)
-        img = bpy.data.images.load(str(path))
+        # One image datablock, read again from the file each frame: adding and removing
+        # an ID rebuilds the depsgraph's relations, and the next evaluation of the scene
+        # (the sun's ray cast, the label pass) then evaluates every object again.
+        if self._frame_image is None:
+            self._frame_image = bpy.data.images.load(str(path))
+        else:
+            self._frame_image.reload()
+        img = self._frame_image
         px = np.empty(len(img.pixels), dtype=np.float32)
         img.pixels.foreach_get(px)
         w, h = img.size
-        bpy.data.images.remove(img)
         return px.reshape(h, w, 4)[::-1, :, :3].copy()
 
 
