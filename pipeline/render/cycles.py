@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import glb as glb_file, sun as sun_model
 from ..perception.gauge import POINTER
+from ..geometry import rays
 from ..geometry.pinhole import look_at, project
 from .sensor import PhoneCamera
 from . import conductors
@@ -297,12 +298,31 @@ class CyclesScene:
         return float(np.nanmax(uv[:, 1]) - np.nanmin(uv[:, 1]))
 
     def sun_visible(self, eye: np.ndarray, sun_dir: np.ndarray) -> bool:
-        """Is the sun unobstructed from the lens (for the veiling glare)?"""
+        """Is the sun unobstructed from the lens (for the veiling glare)? Only what the
+        render shows can hide it: a placement show_only hid is not in the frame. The
+        ray meets the boxes of all objects at once; the shown meshes whose box it
+        enters are ray cast, nearest first (Blender's scene.ray_cast sees every
+        object of the view layer, hidden from renders or not)."""
         from mathutils import Vector
 
         dg = self.bpy.context.evaluated_depsgraph_get()
-        hit = self.scene.ray_cast(dg, Vector(eye + sun_dir * 0.01), Vector(sun_dir))[0]
-        return not hit
+        objs = dg.objects
+        n = len(objs)
+        matrices, corners = np.empty(n * 16, np.float32), np.empty(n * 24, np.float32)
+        objs.foreach_get("matrix_world", matrices)  # column-major
+        objs.foreach_get("bound_box", corners)
+        matrices = matrices.reshape(n, 4, 4).transpose(0, 2, 1).astype(float)
+        origin = np.asarray(eye, float) + np.asarray(sun_dir, float) * 0.01
+        entry = rays.ray_box_entry(origin, sun_dir, *rays.world_boxes(matrices, corners.reshape(n, 8, 3)))
+        for i in np.argsort(entry, kind="stable")[: int(np.isfinite(entry).sum())]:
+            ob = objs[int(i)]
+            if ob.type != "MESH" or ob.hide_render:
+                continue
+            local = np.linalg.inv(matrices[i])
+            start, direction = local[:3, :3] @ origin + local[:3, 3], local[:3, :3] @ sun_dir
+            if ob.original.ray_cast(Vector(start), Vector(direction), depsgraph=dg)[0]:
+                return False
+        return True
 
     def render(self, width: int | None = None, height: int | None = None, samples: int | None = None) -> np.ndarray:
         """(h, w, 3) float32 linear radiance, top row first."""

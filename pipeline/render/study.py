@@ -18,6 +18,7 @@ from .. import sun as sun_model
 from ..perception.metrics import measure
 from .frames import render_shots, write_json
 from ..perception.gauge import placed_dial
+from ..geometry import rays
 from ..geometry.pinhole import intrinsics, look_at, project
 from .sensor import PhoneCamera
 from ..runtime.site import Shot, BuiltSite, load_site
@@ -105,17 +106,7 @@ def _ray_hits_box(origin: np.ndarray, direction: np.ndarray, length: float, pose
     of the model at `pose` (slab test in the model frame)?"""
     o = pose[:3, :3].T @ (origin - pose[:3, 3])
     d = pose[:3, :3].T @ direction
-    t0, t1 = 0.0, length
-    for i in range(3):
-        if abs(d[i]) < 1e-12:
-            if o[i] < lo[i] or o[i] > hi[i]:
-                return False
-            continue
-        a, b = (lo[i] - o[i]) / d[i], (hi[i] - o[i]) / d[i]
-        t0, t1 = max(t0, min(a, b)), min(t1, max(a, b))
-        if t0 > t1:
-            return False
-    return True
+    return bool(rays.ray_box_entry(o, d, np.asarray(lo, float)[None], np.asarray(hi, float)[None])[0] <= length)
 
 
 def _blocked(site: BuiltSite, origin: np.ndarray, direction: np.ndarray, length: float, skip: str = "") -> bool:
