@@ -69,6 +69,8 @@ class WireLabels:
         for sid, paths in self.wires.paths(temperature_c).items():
             r = self.wires.radius(self.wires.span(sid))
             for p in paths:
+                if outside_view(p, r, cam_pose, k, near, far):
+                    continue
                 cols, rows, d = coverage(p, r, cam_pose, k, near, far)
                 pix.append(rows * w + cols)
                 iid.append(np.full(len(d), self.ids[sid], np.int64))
@@ -223,6 +225,27 @@ def coverage(points: np.ndarray, radius: float, pose: np.ndarray, k: dict, near:
             acc.append(v)
         start = stop
     return tuple(np.concatenate(v) for v in out) if out[0] else _nothing()
+
+
+def outside_view(points: np.ndarray, radius: float, pose: np.ndarray, k: dict, near: float, far: float) -> bool:
+    """Whether `coverage` of this wire is certainly empty, at a fraction of its cost
+    (most of a site's spans are out of a close-up's view): every point of the
+    centreline nearer than `near`, or farther than `far`, or more than `radius` beyond
+    one of the four planes through the lens and the image's edges. Each is a
+    half-space, so the whole polyline and its band of half-width f r / d lie outside
+    the image with its points."""
+    cam = (np.asarray(points, float) - pose[:3, 3]) @ pose[:3, :3]
+    x, y, depth = cam[:, 0], cam[:, 1], -cam[:, 2]
+    if (depth < near).all() or (depth > far).all():
+        return True
+    # plane through the lens and the image edge u = edge: x = depth (edge - cx) / fx
+    for coord, f, centre, edges in ((x, k["fx"], k["cx"], (0.0, k["width"])),
+                                    (-y, k["fy"], k["cy"], (0.0, k["height"]))):
+        for edge, side in ((edges[0], -1.0), (edges[1], 1.0)):
+            slope = (edge - centre) / f
+            if (side * (coord - depth * slope) > radius * np.hypot(1.0, slope)).all():
+                return True
+    return False
 
 
 def _nothing() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -230,3 +230,40 @@ def test_spans_take_one_temperature_or_their_types_and_stay_as_built_without():
     assert lowest({"T": 80.0}) == {"A": hot["A"], "B": built["B"]}
     assert lowest({"T": 80.0, "U": None}) == {"A": hot["A"], "B": built["B"]}
     assert lowest({"U": 25.0}) == built  # the temperature it was built at
+
+
+def test_a_wire_skipped_as_outside_the_view_covers_no_pixel():
+    """wire_labels.outside_view only skips wires whose coverage is empty: random wires
+    (catenary-like polylines, near and far, fat and thin) against random cameras, with
+    wires grazing each edge of the image; and it skips most of them."""
+    rng = np.random.default_rng(7)
+    k = intrinsics(math.radians(20.0), 96, 72)
+    skipped = covered = 0
+    for _ in range(400):
+        start = rng.uniform(-40, 40, 3)
+        span = rng.normal(size=3) * rng.uniform(0.5, 30.0)
+        # half the cameras aimed near the wire's middle, half anywhere
+        aim = start + span / 2 + rng.normal(size=3) * 3.0 if rng.random() < 0.5 else rng.uniform(-20, 20, 3)
+        pose = look_at(rng.uniform(-5, 5, 3) + [0, 0, 2], aim)
+        t = np.linspace(0.0, 1.0, 12)[:, None]
+        points = start + t * span - 4.0 * t * (1 - t) * [0, 0, rng.uniform(0, 2)]
+        radius = float(rng.choice([0.005, 0.02, 0.3]))
+        cols = coverage(points, radius, pose, k, 0.1, 60.0)[0]
+        if wire_labels.outside_view(points, radius, pose, k, 0.1, 60.0):
+            skipped += 1
+            assert len(cols) == 0
+        covered += len(cols) > 0
+    assert covered > 50 and skipped > 150
+    # just off each edge by less than the radius: kept; by more: skipped
+    pose = look_at((0.0, 0.0, 0.0), (0.0, 10.0, 0.0))
+    for axis, edge in ((0, k["hfov"] / 2), (2, k["vfov"] / 2)):
+        for sign in (1.0, -1.0):
+            direction = np.zeros(3)
+            direction[1], direction[axis] = math.cos(edge), sign * math.sin(edge)
+            normal = np.zeros(3)
+            normal[1], normal[axis] = -math.sin(edge), sign * math.cos(edge)  # out of the view
+            along = np.cross(direction, normal)
+            line = 10.0 * direction + np.linspace(-1.0, 1.0, 5)[:, None] * along
+            assert not wire_labels.outside_view(line + 0.009 * normal, 0.01, pose, k, 0.1, 60.0)
+            assert len(coverage(line + 0.009 * normal, 0.01, pose, k, 0.1, 60.0)[0]) > 0
+            assert wire_labels.outside_view(line + 0.011 * normal, 0.01, pose, k, 0.1, 60.0)

@@ -117,8 +117,8 @@ def test_a_held_input_let_go_reads_its_edge_again(tmp_path):
 
 
 def test_show_only_hides_exactly_the_other_placements(tmp_path):
-    """CyclesScene.show_only writes every object's render flag at once (foreach_set):
-    the loaded placements not named are hidden, the named ones shown, lights untouched."""
+    """CyclesScene.show_only: the loaded placements not named are hidden, the named
+    ones shown, lights untouched, and a render right after it draws just those."""
     pytest.importorskip("bpy")
     from pipeline.render.cycles import CyclesScene
     from pipeline.render.sensor import PhoneCamera
