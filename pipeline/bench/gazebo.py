@@ -83,7 +83,7 @@ def gazebo_section(ctx: Context) -> dict:
     seen = gazebo.probe_world(world, [models], meshes=False, physics_s=ctx.pick(0.5, 5.0))
     out = {"placements": len(record["placements"]),
            "world": {k: seen["world"][k] for k in ("parse_s", "peak_rss_mb", "models", "links", "visuals", "collisions")},
-           "budget": {"peak_rss_mb": gazebo.WORLD_PARSE_BUDGET_MB, "parse_s": gazebo.WORLD_PARSE_BUDGET_S},
+           "budget": {"peak_rss_mb": world_sdf.PARSE_BUDGET_MB, "parse_s": gazebo.WORLD_PARSE_BUDGET_S},
            "physics": seen.get("physics", {})}
     if not ctx.quick:  # gigabytes and most of a minute: the full run only
         before = gazebo.probe_world(_includes_world(ctx.work / "includes.sdf", record), [models], meshes=False)

@@ -78,31 +78,50 @@ class CollisionCells:
         return True
 
     def write(self, folder: Path) -> etree._Element | None:
-        """Each cell's mesh into folder/FOLDER (its earlier .dae files removed) and the
-        model that draws them; None when no placement collides."""
+        """write_meshes(folder), and the model that draws them."""
+        self.write_meshes(folder)
+        return self.model()
+
+    def write_meshes(self, folder: Path) -> None:
+        """Each cell's mesh into folder/FOLDER, its earlier .dae files removed."""
         out = Path(folder) / FOLDER
         if out.is_dir():
             for old in out.glob("*.dae"):
                 old.unlink()
         if not self._cells:
-            return None
+            return
         out.mkdir(parents=True, exist_ok=True)
-        model = etree.Element("model", name=MODEL_NAME)
-        etree.SubElement(model, "static").text = "true"
-        link = etree.SubElement(model, "link", name=LINK_NAME)
         for (i, j), pieces in sorted(self._cells.items()):
-            name = f"e{i}_n{j}"
-            corner = np.array([i * CELL_M, j * CELL_M, 0.0])
+            name, corner = _cell_name(i, j), _cell_corner(i, j)
             offsets = np.cumsum([0] + [len(v) for v, _ in pieces[:-1]])
             vertices = np.concatenate([v for v, _ in pieces]) - corner
             faces = np.concatenate([f + k for (_, f), k in zip(pieces, offsets)])
             vertices, faces = weld(vertices, faces)
             (out / f"{name}.dae").write_bytes(collada_bytes(name, vertices, faces))
+
+    def model(self) -> etree._Element | None:
+        """The static model whose collisions are the cells' meshes (FOLDER/<cell>.dae,
+        write_meshes); None when no placement collides."""
+        if not self._cells:
+            return None
+        model = etree.Element("model", name=MODEL_NAME)
+        etree.SubElement(model, "static").text = "true"
+        link = etree.SubElement(model, "link", name=LINK_NAME)
+        for i, j in sorted(self._cells):
+            name = _cell_name(i, j)
             collision = etree.SubElement(link, "collision", name=name)
-            etree.SubElement(collision, "pose").text = " ".join(fmt(v) for v in (*corner.tolist(), 0.0, 0.0, 0.0))
+            etree.SubElement(collision, "pose").text = " ".join(fmt(v) for v in (*_cell_corner(i, j).tolist(), 0.0, 0.0, 0.0))
             uri = etree.SubElement(etree.SubElement(etree.SubElement(collision, "geometry"), "mesh"), "uri")
             uri.text = f"{FOLDER}/{name}.dae"
         return model
+
+
+def _cell_name(i: int, j: int) -> str:
+    return f"e{i}_n{j}"
+
+
+def _cell_corner(i: int, j: int) -> np.ndarray:
+    return np.array([i * CELL_M, j * CELL_M, 0.0])
 
 
 def _collision_parts(path: Path, exact: bool) -> tuple[np.ndarray, np.ndarray] | None:

@@ -86,8 +86,9 @@ def sun_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
 
 
 def write(path: Path, **world_args) -> None:
-    """The world (world_element's arguments) in the file `path`."""
-    _save(path, world_element(path, **world_args))
+    """The world (world_element's arguments) in the file `path`, its collision cells'
+    meshes beside it."""
+    _save(path, *world_element(**world_args))
 
 
 def write_within_budget(path: Path, **world_args) -> tuple[str, float]:
@@ -95,11 +96,11 @@ def write_within_budget(path: Path, **world_args) -> tuple[str, float]:
     moving parts when sdformat would parse it within PARSE_BUDGET_MB
     (parse_estimate_mb), else with none. Returns ("all" or "none", the estimate of the
     world with every switch moving, MB)."""
-    root = world_element(path, moves=lambda tag: True, **world_args)
+    root, cells = world_element(moves=lambda tag: True, **world_args)
     estimate = parse_estimate_mb(root)
     if estimate > PARSE_BUDGET_MB:
-        root = world_element(path, moves=lambda tag: False, **world_args)
-    _save(path, root)
+        root, cells = world_element(moves=lambda tag: False, **world_args)
+    _save(path, root, cells)
     return ("all" if estimate <= PARSE_BUDGET_MB else "none"), estimate
 
 
@@ -127,14 +128,16 @@ def moving_parts_mb(joints: int) -> float:
     return joints * (PARSE_MB_PER_JOINT + PARSE_MB_PER_VISUAL)
 
 
-def _save(path: Path, root: etree._Element) -> None:
+def _save(path: Path, root: etree._Element, cells: CollisionCells) -> None:
+    cells.write_meshes(Path(path).parent)
     Path(path).write_bytes(etree.tostring(root, pretty_print=True, xml_declaration=True, encoding="UTF-8"))
 
 
-def world_element(path: Path, *, site_name: str, origin_llh, placed: list[Placed], terrain_model: str,
+def world_element(*, site_name: str, origin_llh, placed: list[Placed], terrain_model: str,
           sun: dict, models: Path, own_model: frozenset[str] = frozenset(), extra_models=(),
-          moves: Callable[[str], bool] = lambda tag: True) -> etree._Element:
-    """The world's <sdf> element; its collision cells are written beside `path`.
+          moves: Callable[[str], bool] = lambda tag: True) -> tuple[etree._Element, CollisionCells]:
+    """The world's <sdf> element, and its collision cells, whose meshes the world names
+    beside it (CollisionCells.write_meshes).
     models: the folder of the built packages (variants are read from it);
     own_model: asset ids whose placements stay one <include> each; extra_models:
     lxml <model> elements appended to the world (the conductors); moves: whether a
@@ -197,12 +200,12 @@ def world_element(path: Path, *, site_name: str, origin_llh, placed: list[Placed
         moving = [pl for pl in members if moves(pl.placement.tag)]
         if moving:
             _append_moving(world, Path(models), variant, moving, variant + world_joints.MODEL_SUFFIX)
-    merged = cells.write(Path(path).parent)
+    merged = cells.model()
     if merged is not None:
         world.append(merged)
     for model in extra_models:
         world.append(copy.deepcopy(model))  # a world made twice (write_within_budget) holds its own
-    return sdf
+    return sdf, cells
 
 
 def _append_moving(world: etree._Element, models: Path, variant: str, members: list[Placed], name: str) -> None:
