@@ -29,7 +29,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 G = 9.80665  # standard gravity, m/s^2: mass per metre -> weight per metre
 VERTICAL_TOL = 1e-9  # horizontal / chord length below which a span is a plumb line
@@ -200,6 +199,8 @@ def from_sag(p0, p1, target: float) -> Catenary:
 
     guess = math.log(L * chord / (8.0 * target))  # parabola: sag = L chord / 8a
     lo, hi = _bracket(excess, guess - 0.5, guess + 0.5, 1.0, f"sag {target:g} m is beyond any catenary of this span")
+    from scipy.optimize import brentq  # here: importing scipy.optimize costs a process that solves no span 0.3 s
+
     log_a = brentq(excess, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200)
     a = math.exp(log_a)
     return Catenary(p0, p1, direction, L, h, a, _lowest(L, h, a))
@@ -330,6 +331,8 @@ def change_of_state(p0, p1, w: float, ea: float, alpha: float, h_ref: float, t_r
                       f"the span goes slack beyond representation at {t:g} deg C",
                       ceiling=(math.log(h_ref) + 60,
                                f"the conductor cannot shorten enough at {t:g} deg C (inextensible and taut)"))
+    from scipy.optimize import brentq
+
     return math.exp(brentq(excess, lo, hi, xtol=1e-14, rtol=4 * np.finfo(float).eps, maxiter=200))
 
 

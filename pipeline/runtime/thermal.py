@@ -16,8 +16,6 @@ Solved by a bracketed root search (the net heat loss rises with Tc). Pure math.
 
 from __future__ import annotations
 
-from scipy.optimize import brentq
-
 
 def air(film_c: float, elevation_m: float) -> tuple[float, float, float]:
     """Dynamic viscosity (Pa s), density (kg/m^3) and thermal conductivity (W/(m K))
@@ -60,5 +58,7 @@ def temperature(current_a: float, ambient_c: float, *, diameter_m: float, r25_oh
         hi += 50.0
         if hi > ambient_c + 2000.0:
             raise ValueError(f"{current_a:g} A: no steady state below {hi:g} C (runaway)")
+    from scipy.optimize import brentq  # here: importing scipy.optimize costs a process that solves nothing 0.3 s
+
     return brentq(net, ambient_c - 1e-9, hi, xtol=1e-9)
 
