@@ -45,6 +45,14 @@ def register_exit_handler(staging: Path, marker: str) -> dict:
     return {}
 
 
+def whose(staging: Path, name: str, delay: float = 0.0) -> dict:
+    """The process that ran it, after `delay` s, in out/<name>.txt and its result."""
+    time.sleep(delay)
+    (staging / "out").mkdir(parents=True, exist_ok=True)
+    (staging / "out" / f"{name}.txt").write_text(str(os.getpid()))
+    return {"pid": os.getpid()}
+
+
 def die(staging: Path, **_) -> dict:
     """An action whose worker dies under it, as the kernel's out-of-memory killer
     ends a process (SIGKILL), after writing a part of an output."""

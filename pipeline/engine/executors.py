@@ -29,17 +29,20 @@ ExecutorFactory = Callable[[Workers], Executor]
 def local_pool(workers: Workers) -> Executor:
     """`workers.count` spawned processes that serve many tasks each (spawned, not
     forked: the scheduler's process holds threads, and Blender does not survive a
-    fork of a process that imported it)."""
+    fork of a process that imported it); started as tasks need them, or on demand
+    (Workers.on_demand, OnDemandPool)."""
     import multiprocessing  # only when a task runs: a no-op build and the CLI's options need none
     from concurrent.futures import ProcessPoolExecutor
 
     from ..scratch import pool_folder, remove_with
+    from .pool import OnDemandPool
 
     context = multiprocessing.get_context("spawn")
     slots = context.Value("i", 0)  # each worker takes the next: the CPU it keeps to on a one-core task
     temp = pool_folder()  # the workers' temp folders (Blender's among them), whatever becomes of them
-    pool = ProcessPoolExecutor(max_workers=workers.count, mp_context=context, initializer=init_worker,
-                               initargs=(workers.threads, workers.cpus, slots, workers.memory, temp))
+    kind = OnDemandPool if workers.on_demand else ProcessPoolExecutor
+    pool = kind(max_workers=workers.count, mp_context=context, initializer=init_worker,
+                initargs=(workers.threads, workers.cpus, slots, workers.memory, temp))
     remove_with(pool, temp)
     return pool
 

@@ -6,7 +6,8 @@
   (graph.output_digest), so a rerun that made the same bytes stops there.
 - Tasks run on an executor (engine.executors; by default a pool of spawned
   workers that serve many tasks each); the scheduler tells it how many tasks run at
-  once and each one's share of the cores (`_worker_setup`).
+  once and each one's share of the cores (`_worker_setup`), and a local pool when a
+  task has waited long enough for a worker to start another (GROW_AFTER_S).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
@@ -34,10 +35,14 @@ from ..errors import UserError
 from ..files import atomic_write
 from .cache import DEFAULT_LIMIT, Cache, cache_root
 from .executors import ExecutorFactory, local_pool
-from .worker import Workers, default_memory, died, run_task, warm_up
+from .worker import Workers, death, default_memory, died, pool_processes, run_task, warm_up
 from .graph import FileHasher, Task, check_graph, explain, output_digest, record
 
 STATE_FILE = ".state.json"
+# A task that has waited this long for a busy worker gets a new one (a pool that starts
+# workers on demand): less than a spawned worker takes to start and import a task's
+# libraries, more than the short tasks of an edit's chain take to run.
+GROW_AFTER_S = 0.25
 LOCK_FILE = ".lock"
 
 
@@ -333,7 +338,7 @@ class Scheduler:
             return False
         b.running[future] = task
         b.report.explanations.append(_stood_on(explain(task, previous, False, b.digests), stood_on))
-        b.workers.update(_processes(pool))
+        b.workers.update(pool_processes(pool))
         return True
 
     def _pool(self, b: _Build):
@@ -342,7 +347,7 @@ class Scheduler:
         if b.pool is None:
             if b.threads is None:
                 b.threads = self._worker_setup(b.order, b.state, b.hasher)
-            b.pool = self.executor(Workers(self.jobs, b.threads, self._cpus(), self.memory_limit))
+            b.pool = self.executor(Workers(self.jobs, b.threads, self._cpus(), self.memory_limit, on_demand=True))
         return b.pool
 
     def _drop_pool(self, b: _Build) -> dict:
@@ -357,10 +362,26 @@ class Scheduler:
     def _wait(self, b: _Build) -> list[Future]:
         """The futures that finished, in task order; all of them when a worker died
         (its pool goes with it: every task in flight ends now)."""
-        finished, _ = wait(list(b.running), return_when=FIRST_COMPLETED)
+        finished = self._first_finished(b)
         if any(isinstance(f.exception(), BrokenExecutor) for f in finished):
             finished, _ = wait(list(b.running))
         return sorted(finished, key=lambda f: b.running[f].name)
+
+    def _first_finished(self, b: _Build) -> set[Future]:
+        """Wait for a task in flight to finish. While a task waits in the pool for a
+        worker (more in flight than workers started), a pool that starts workers on
+        demand (`grow`) gets one more each GROW_AFTER_S."""
+        grow = getattr(b.pool, "grow", None)
+        while True:
+            queued = grow is not None and self._in_flight(b) > len(pool_processes(b.pool))
+            finished, _ = wait(list(b.running), timeout=GROW_AFTER_S if queued else None, return_when=FIRST_COMPLETED)
+            if finished:
+                return finished
+            grow()
+
+    def _in_flight(self, b: _Build) -> int:
+        """Tasks and warm-ups sent to the pool and not yet finished."""
+        return len(b.running) + sum(not f.done() for f, _ in b.warming)
 
     def _collect(self, b: _Build, finished: list[Future]) -> None:
         """Record each finished task: its outputs, its failure, or its worker's death."""
@@ -462,7 +483,7 @@ class Scheduler:
         if len(lost) == 1:
             task = lost[0]
             b.suspects.discard(task.name)
-            self._fail(b, task, died(_death(workers)))
+            self._fail(b, task, died(death(workers)))
             b.done.add(task.name)
             return
         names = {t.name for t in lost}
@@ -480,8 +501,10 @@ class Scheduler:
         next task goes to. Each set of modules is sent once. Warming every waiting
         task's modules at once kept the idle worker busy past the next task's start:
         the source task of an edit ran in the worker that had just read the .blend,
-        importing its own libraries."""
-        idle = self.jobs - len(b.running) - sum(not f.done() for f, _ in b.warming)
+        importing its own libraries. Only a started worker warms up: a pool that
+        starts workers on demand would otherwise start one to import and wait."""
+        workers = len(pool_processes(b.pool)) if hasattr(b.pool, "grow") else self.jobs
+        idle = workers - self._in_flight(b)
         started = b.done | {t.name for t in b.running.values()}
         modules = tuple(dict.fromkeys(m for t in b.pending.values() if started.issuperset(t.deps) for m in t.warm))
         if idle <= 0 or not modules or any(sent == modules for _, sent in b.warming):
@@ -552,31 +575,3 @@ def _stood_on(why: dict, failed: list[str]) -> dict:
         why["previous_of"] = failed
     return why
 
-
-def _processes(pool) -> dict:
-    """A local pool's worker processes by pid (empty for other executors): their exit
-    codes say how one died."""
-    return dict(getattr(pool, "_processes", None) or {})
-
-
-def _death(workers: dict) -> str:
-    """How a pool's worker died, from the exit codes of its processes: the pool
-    terminates the others (SIGTERM) when one dies."""
-    import signal
-
-    codes = set()
-    for process in workers.values():
-        code = getattr(process, "exitcode", None)
-        if code not in (None, 0, -signal.SIGTERM):
-            codes.add(code)
-    if len(codes) != 1:
-        return ""
-    code = codes.pop()
-    if code == -signal.SIGKILL:
-        return " (killed: SIGKILL, as the kernel's out-of-memory killer sends)"
-    if code < 0:
-        try:
-            return f" ({signal.Signals(-code).name})"
-        except ValueError:
-            return f" (signal {-code})"
-    return f" (exit code {code})"

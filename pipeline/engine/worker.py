@@ -30,12 +30,17 @@ class Workers:
     cpus:    CPUs to hold the workers to, empty for no affinity;
     memory:  bytes of address space each worker may map (RLIMIT_AS), None for no
              limit: a task that needs more fails with MemoryError, which is its own
-             failure, before the kernel's out-of-memory killer picks a process."""
+             failure, before the kernel's out-of-memory killer picks a process;
+    on_demand: a local pool starts its first worker with the first task and each
+             further one only when the caller asks (`grow`: the scheduler, once a task
+             has waited for one); otherwise one for each task submitted while none is
+             idle."""
 
     count: int
     threads: int
     cpus: tuple[int, ...] = ()
     memory: int | None = None
+    on_demand: bool = False
 
 
 # a worker's address space holds far more than it touches (Blender, USD, thread
@@ -105,6 +110,35 @@ def died(how: str = "") -> dict:
     """A task whose worker process died under it, as run_task's failures read; `how`:
     what is known of the death (an exit code)."""
     return {"ok": False, "error": f"its worker process died{how}", "kind": "worker"}
+
+
+def pool_processes(pool) -> dict:
+    """A local pool's worker processes by pid (empty for other executors): how many
+    it has started, and by their exit codes how one died."""
+    return dict(getattr(pool, "_processes", None) or {})
+
+
+def death(workers: dict) -> str:
+    """How a pool's worker died, from the exit codes of its processes: the pool
+    terminates the others (SIGTERM) when one dies."""
+    import signal
+
+    codes = set()
+    for process in workers.values():
+        code = getattr(process, "exitcode", None)
+        if code not in (None, 0, -signal.SIGTERM):
+            codes.add(code)
+    if len(codes) != 1:
+        return ""
+    code = codes.pop()
+    if code == -signal.SIGKILL:
+        return " (killed: SIGKILL, as the kernel's out-of-memory killer sends)"
+    if code < 0:
+        try:
+            return f" ({signal.Signals(-code).name})"
+        except ValueError:
+            return f" (signal {-code})"
+    return f" (exit code {code})"
 
 
 def warm_up(modules: tuple[str, ...]) -> None:

@@ -290,7 +290,8 @@ def test_a_one_core_task_keeps_to_a_cpu_of_its_own(src, tmp_path):
     """Two tasks side by side each run on their own CPU (fcpw's threads of one would
     otherwise wait on the other's); a task alone runs on all of the build's."""
     usable = _affinity()
-    report = toy_graph.build(src, tmp_path / "build", jobs=2, delay=0.05)  # both uppers run at once
+    # both uppers run at once: each outlasts the wait after which the second worker starts
+    report = toy_graph.build(src, tmp_path / "build", jobs=2, delay=0.2)
     a, b = (report.results[n]["cpus"] for n in ("upper:a", "upper:b"))
     assert len(a) == 1 and len(b) == 1 and a != b and set(a + b) <= set(usable)
     assert report.results["join"]["cpus"] == usable
@@ -467,3 +468,59 @@ def test_an_idle_worker_imports_ahead_what_the_waiting_tasks_will(src, tmp_path)
     (src / "a.txt").write_text("alpha, edited")
     assert build() == ["upper", "warm_up", ("wave",), "join"]
     assert "wave" in sys.modules
+
+
+def _fan_out(delay: float) -> list:
+    """first -> second, third: the two become ready together when first is done;
+    each sleeps `delay` s."""
+    from pipeline.engine.graph import Task
+
+    def task(name, deps=()):
+        return Task(name=name, stage="assets", action=toy_graph.whose, args={"name": name, "delay": delay},
+                    deps=deps, params={"delay": delay}, code="v1", outputs=(f"out/{name}.txt",))
+
+    return [task("first"), task("second", ("first",)), task("third", ("first",))]
+
+
+def test_a_second_worker_starts_only_for_a_task_that_waited_for_one(tmp_path):
+    """An edit's package is followed by its placement and the viewer at once: short
+    tasks that become ready together run in the worker already started. Tasks that
+    keep a worker busy past GROW_AFTER_S get a second one, side by side."""
+    from pipeline.engine.executors import local_pool
+    from pipeline.engine.scheduler import GROW_AFTER_S, Scheduler
+    from pipeline.engine.worker import pool_processes
+
+    started = []
+
+    def counted(workers):
+        """The local pool, with how many workers it started recorded when it shuts down."""
+        pool = local_pool(workers)
+        shutdown = pool.shutdown
+
+        def recorded(*args, **kwargs):
+            started.append(len(pool_processes(pool)))
+            return shutdown(*args, **kwargs)
+
+        pool.shutdown = recorded
+        return pool
+
+    short = Scheduler(tmp_path / "short", jobs=2, executor=counted).run(_fan_out(0.0))
+    assert started == [1] and len({short.results[n]["pid"] for n in ("first", "second", "third")}) == 1
+    long = Scheduler(tmp_path / "long", jobs=2, executor=counted).run(_fan_out(4 * GROW_AFTER_S))
+    assert started == [1, 2] and long.results["second"]["pid"] != long.results["third"]["pid"]
+
+
+def test_a_pool_on_demand_grows_to_its_count_and_no_further(tmp_path):
+    from pipeline.engine.executors import local_pool
+    from pipeline.engine.worker import Workers, pool_processes, run_task
+
+    pool = local_pool(Workers(count=2, threads=1, on_demand=True))
+    try:
+        pids = {pool.submit(run_task, toy_graph.whose, {"name": str(i)}, str(tmp_path / str(i))).result()["result"]["pid"]
+                for i in range(3)}
+        assert len(pids) == 1 and len(pool_processes(pool)) == 1
+        assert pool.grow() and len(pool_processes(pool)) == 2
+        assert not pool.grow()
+    finally:
+        pool.shutdown(wait=True)
+    assert not pool.grow()
