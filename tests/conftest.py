@@ -93,11 +93,12 @@ def src(tmp_path) -> Path:
     return d
 
 
-@pytest.hookimpl(tryfirst=True)
+@pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config, items):
     """For pytest-xdist's --dist loadgroup (make test): the tests that share a module's
     fixture (one of its parameters, when it has them) run on one worker, so that it is
-    made once; the others are spread one by one. Before xdist reads the marks."""
+    made once; the others are spread one by one. The marks are set before xdist reads
+    them."""
     for item in items:
         info = getattr(item, "_fixtureinfo", None)
         if info is None:
@@ -110,10 +111,12 @@ def pytest_collection_modifyitems(config, items):
             shared.append(f"{name}[{spec.indices[name]}]" if spec is not None and name in spec.params else name)
         if shared:
             item.add_marker(pytest.mark.xdist_group(f"{item.module.__name__}:{'+'.join(shared)}"))
+    result = yield  # test_grouping checks that xdist took the marks
     # The costly first, the quick ones last to fill the gaps: the tests that share a
     # module fixture while the sample builds in the background, then what needs the
     # sample.
     items.sort(key=_cost_rank)
+    return result
 
 
 def _cost_rank(item) -> int:
