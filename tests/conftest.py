@@ -96,27 +96,53 @@ def src(tmp_path) -> Path:
 @pytest.hookimpl(wrapper=True)
 def pytest_collection_modifyitems(config, items):
     """For pytest-xdist's --dist loadgroup (make test): the tests that share a module's
-    fixture (one of its parameters, when it has them) run on one worker, so that it is
-    made once; the others are spread one by one. The marks are set before xdist reads
-    them."""
-    for item in items:
-        info = getattr(item, "_fixtureinfo", None)
-        if info is None:
-            continue
-        shared = []
-        for name in sorted(info.name2fixturedefs):
-            if info.name2fixturedefs[name][-1].scope not in ("module", "class", "package"):
-                continue
-            spec = getattr(item, "callspec", None)
-            shared.append(f"{name}[{spec.indices[name]}]" if spec is not None and name in spec.params else name)
-        if shared:
-            item.add_marker(pytest.mark.xdist_group(f"{item.module.__name__}:{'+'.join(shared)}"))
+    fixture (one of its parameters, when it has them), directly or through another
+    test that uses it with theirs, run on one worker, so that each is made once; the
+    others are spread one by one. The marks are set before xdist reads them."""
+    shared = {item: _module_fixtures(item) for item in items}
+    group = _fixture_groups(shared)
+    for item, names in shared.items():
+        if names:
+            item.add_marker(pytest.mark.xdist_group(group[item.module.__name__, names[0]]))
     result = yield  # test_grouping checks that xdist took the marks
     # The costly first, the quick ones last to fill the gaps: the tests that share a
     # module fixture while the sample builds in the background, then what needs the
     # sample.
     items.sort(key=_cost_rank)
     return result
+
+
+def _module_fixtures(item) -> list[str]:
+    """The fixtures of a module's scope (or a class's or package's) that `item` uses,
+    a parametrized one by its parameter's index."""
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return []
+    spec = getattr(item, "callspec", None)
+    return [f"{name}[{spec.indices[name]}]" if spec is not None and name in spec.params else name
+            for name in sorted(info.name2fixturedefs)
+            if info.name2fixturedefs[name][-1].scope in ("module", "class", "package")]
+
+
+def _fixture_groups(shared: dict) -> dict[tuple[str, str], str]:
+    """Each (module, fixture) to its group's name: the module and the fixtures that
+    tests use together, joined over every test of the module that uses one."""
+    parent: dict[tuple[str, str], tuple[str, str]] = {}
+
+    def root(key):
+        while parent.setdefault(key, key) != key:
+            key = parent[key]
+        return key
+
+    for item, names in shared.items():
+        for name in names[1:]:
+            parent[root((item.module.__name__, name))] = root((item.module.__name__, names[0]))
+        if names:
+            root((item.module.__name__, names[0]))
+    members: dict = {}
+    for key in parent:
+        members.setdefault(root(key), []).append(key[1])
+    return {key: f"{key[0]}:{'+'.join(sorted(members[root(key)]))}" for key in parent}
 
 
 def _cost_rank(item) -> int:
