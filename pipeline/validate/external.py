@@ -44,6 +44,11 @@ _TIMEOUT_S = 300
 # Loading the COLLADA schema is slow: keep one per thread (a schema's error log is per
 # instance, so threads must not share one).
 _LOCAL = threading.local()
+# libxml2 sets up its built-in schema types (anyType and the rest) on a process's first
+# schema compile, without a lock: two threads compiling the first schemas of a process
+# at once could see them half made, and one compile failed with a type "(NULL)" not
+# derived from anyType. Compiles are one per thread: they take turns.
+_COMPILING = threading.Lock()
 # The schema imports xml.xsd from w3.org; pycollada serves its local copy through an lxml
 # resolver. lxml reaches a resolver through libxml2's entity loader, one per process,
 # which every parse in any thread sets on entry and puts back on exit: a parse that ended
@@ -468,7 +473,8 @@ def collada_schema(path: Path) -> ExternalResult:
     schema = getattr(_LOCAL, "collada", None)
     try:
         if schema is None:
-            schema = _LOCAL.collada = _collada_schema_instance()
+            with _COMPILING:
+                schema = _LOCAL.collada = _collada_schema_instance()
     except (OSError, etree.Error) as e:
         return ExternalResult(name, str(path), "failed", (f"the COLLADA schema did not compile: {e}",),
                               _COLLADA_HINT)
