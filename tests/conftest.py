@@ -135,10 +135,9 @@ def _fixture_groups(shared: dict) -> dict[tuple[str, str], str]:
         return key
 
     for item, names in shared.items():
-        for name in names[1:]:
-            parent[root((item.module.__name__, name))] = root((item.module.__name__, names[0]))
-        if names:
-            root((item.module.__name__, names[0]))
+        module = item.module.__name__
+        for name in names:
+            parent[root((module, name))] = root((module, names[0]))
     members: dict = {}
     for key in parent:
         members.setdefault(root(key), []).append(key[1])

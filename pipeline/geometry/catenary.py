@@ -199,7 +199,9 @@ def from_sag(p0, p1, target: float) -> Catenary:
 
     guess = math.log(L * chord / (8.0 * target))  # parabola: sag = L chord / 8a
     lo, hi = _bracket(excess, guess - 0.5, guess + 0.5, 1.0, f"sag {target:g} m is beyond any catenary of this span")
-    from scipy.optimize import brentq  # here: importing scipy.optimize costs a process that solves no span 0.3 s
+    # imported here: scipy.optimize is slow to import, and not every process that
+    # imports this module solves a span
+    from scipy.optimize import brentq
 
     log_a = brentq(excess, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200)
     a = math.exp(log_a)

@@ -58,7 +58,9 @@ def temperature(current_a: float, ambient_c: float, *, diameter_m: float, r25_oh
         hi += 50.0
         if hi > ambient_c + 2000.0:
             raise ValueError(f"{current_a:g} A: no steady state below {hi:g} C (runaway)")
-    from scipy.optimize import brentq  # here: importing scipy.optimize costs a process that solves nothing 0.3 s
+    # imported here: scipy.optimize is slow to import, and not every process that
+    # imports the runtime's nodes solves a conductor's temperature
+    from scipy.optimize import brentq
 
     return brentq(net, ambient_c - 1e-9, hi, xtol=1e-9)
 
