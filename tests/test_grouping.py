@@ -1,8 +1,8 @@
 """`make test`'s grouping (conftest.pytest_collection_modifyitems): the tests that share
 a module fixture carry an xdist_group mark, and pytest-xdist's --dist loadgroup sends
 each group to one worker by the name it puts after an "@" in the tests' node ids. With
-pytest 9.2 the ids no longer take the name (pytest-xdist issue 1386): the groups were
-spread as single tests, and a module fixture was made on each worker that ran one of
+pytest 9.2 the ids do not take the name (pytest-xdist issue 1386): the groups are
+spread as single tests, and a module fixture is made on each worker that runs one of
 its tests."""
 
 from __future__ import annotations

@@ -10,9 +10,9 @@ class OnDemandPool(ProcessPoolExecutor):
     """A process pool that starts its first worker with the first task and each
     further one when `grow` is called. The stock pool starts one for every task
     submitted while no worker is idle, and counts a worker idle only after its last
-    task's future is done: an edit's chain of short tasks (a package, then its
-    placement and the viewer at once) started a second process that imported the same
-    libraries again and finished no sooner. Written against CPython 3.11's pool (bpy
+    task's future is done: for an edit's chain of short tasks (a package, then its
+    placement and the viewer at once) it starts a second process that imports the
+    same libraries again and finishes no sooner. Written against CPython 3.11's pool (bpy
     pins 3.11): submit calls `_adjust_process_count` to start a worker."""
 
     def _adjust_process_count(self):

@@ -498,10 +498,10 @@ class Scheduler:
         alone): an edit runs its chain task by task, and each task would otherwise start
         in a worker that has not imported its libraries. A pool hands the next call to
         the worker that has waited longest, so the idle worker warmed now is the one the
-        next task goes to. Each set of modules is sent once. Warming every waiting
-        task's modules at once kept the idle worker busy past the next task's start:
-        the source task of an edit ran in the worker that had just read the .blend,
-        importing its own libraries. Only a started worker warms up: a pool that
+        next task goes to. Each set of modules is sent once: warming every waiting
+        task's modules at once would keep the idle worker busy past the next task's
+        start, and an edit's source task would run in the worker that has just read the
+        .blend, importing its own libraries. Only a started worker warms up: a pool that
         starts workers on demand would otherwise start one to import and wait."""
         workers = len(pool_processes(b.pool)) if hasattr(b.pool, "grow") else self.jobs
         idle = workers - self._in_flight(b)

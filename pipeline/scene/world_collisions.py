@@ -77,11 +77,6 @@ class CollisionCells:
         self._cells.setdefault(cell, []).append((vertices @ world[:3, :3].T + world[:3, 3], faces))
         return True
 
-    def write(self, folder: Path) -> etree._Element | None:
-        """write_meshes(folder), and the model that draws them."""
-        self.write_meshes(folder)
-        return self.model()
-
     def write_meshes(self, folder: Path) -> None:
         """Each cell's mesh into folder/FOLDER, its earlier .dae files removed."""
         out = Path(folder) / FOLDER

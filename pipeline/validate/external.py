@@ -45,9 +45,9 @@ _TIMEOUT_S = 300
 # instance, so threads must not share one).
 _LOCAL = threading.local()
 # libxml2 sets up its built-in schema types (anyType and the rest) on a process's first
-# schema compile, without a lock: two threads compiling the first schemas of a process
-# at once could see them half made, and one compile failed with a type "(NULL)" not
-# derived from anyType. Compiles are one per thread: they take turns.
+# schema compile, without a lock: a compile in another thread that meets them half made
+# fails with a type "(NULL)" not derived from anyType. Compiles are one per thread:
+# they take turns.
 _COMPILING = threading.Lock()
 # The schema imports xml.xsd from w3.org; pycollada serves its local copy through an lxml
 # resolver. lxml reaches a resolver through libxml2's entity loader, one per process,

@@ -337,7 +337,8 @@ def test_devices_piled_on_one_point_are_drawn_and_collide_once(site, tmp_path):
     # near ones in the cells too: every triangle of their collision meshes
     model = grouped_model("kiosk", out / "models" / "kiosk" / "model.sdf", [*spot, turned], cells=cells, drawn=drawn)
     assert model.findall("link/collision") == [] and len(model.findall("frame")) == 6
-    merged = cells.write(tmp_path)
+    cells.write_meshes(tmp_path)
+    merged = cells.model()
     (cell,) = merged.findall("link/collision")  # all within one cell
     seen = next(iter(gazebo.probe_meshes([tmp_path / cell.findtext("geometry/mesh/uri")]).values()))
     vertices, faces = _whole_collision(out, "kiosk")
