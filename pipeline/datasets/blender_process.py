@@ -23,7 +23,6 @@ from __future__ import annotations
 import importlib
 import json
 import os
-import shutil
 import subprocess
 import sys
 import threading
@@ -32,6 +31,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 
 from ..errors import UserError
+from ..scratch import pool_folder, remove_folder
 
 # the folder that holds the pipeline package: a Blender process imports it whatever
 # the worker's working folder
@@ -62,7 +62,6 @@ class BlenderProcess:
     """One Blender subprocess; `call` runs a function in it."""
 
     def __init__(self, log: str | None = None, idle_s: float = 0.0):
-        from ..scratch import pool_folder
 
         self.log = log
         self.temp = pool_folder("twin_blender_")
@@ -128,13 +127,13 @@ class BlenderProcess:
         except subprocess.TimeoutExpired:
             self.kill()
         self._from.close()
-        shutil.rmtree(self.temp, ignore_errors=True)
+        remove_folder(self.temp)
 
     def kill(self) -> None:
         if self.alive():
             self.proc.kill()
         self.proc.wait()
-        shutil.rmtree(self.temp, ignore_errors=True)
+        remove_folder(self.temp)
 
 
 # --- a dataset's frames, on whatever runs them --------------------------------------------
