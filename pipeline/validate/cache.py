@@ -4,7 +4,7 @@ A package's verdicts (the external validators' on its files, Gazebo's on its mes
 and model bounds) are kept under a key made of the bytes of every file in its folder
 and in its LOD variants' folders, and of the versions of everything that judged them:
 the pipeline's validate code (engine.code: every module it imports, and the pinned
-libraries), the libsdformat library and the `ign` script, pycollada with lxml and
+libraries), the libsdformat library, pycollada with lxml and
 libxml2, usd-core, the gltf-validator package, the gzprobe binary and node. A changed
 byte in a package or any other version of a tool finds no entry, so the package is
 checked again: an entry is never trusted across validator versions.
@@ -33,7 +33,7 @@ from .external import ExternalResult
 FOLDER = ".validate"
 FILE = "results.json"
 FORMAT = 1
-# where the loader looks for the SDF library `ign sdf` and the fallback load
+# where the loader looks for the SDF library (external._CMDCHECK loads it)
 _LIBRARY_DIRS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib", "/usr/local/lib")
 
 
@@ -58,8 +58,6 @@ def _library_versions() -> tuple[tuple[str, str], ...]:
 
     versions = {
         "sdformat": _file_version(_library(external._SDFORMAT_LIBRARY)),
-        "ign": _file_version(Path(shutil.which("ign")) if shutil.which("ign") else None),
-        "ign_config_path": os.environ.get("IGN_CONFIG_PATH", ""),
         "libxml2": ".".join(map(str, etree.LIBXML_VERSION)), "lxml": ".".join(map(str, etree.LXML_VERSION)),
         "gltf-validator": _file_version(external._GLTF_MODULE / "package.json"),
         "node": _file_version(Path(shutil.which("node")) if shutil.which("node") else None),

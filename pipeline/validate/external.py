@@ -9,7 +9,6 @@ function runs, so this module imports without them.
 from __future__ import annotations
 
 import copy
-import functools
 import json
 import math
 import os
@@ -23,7 +22,7 @@ from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Callable, Literal
 
 from lxml import etree
 
@@ -73,20 +72,35 @@ class ExternalResult:
 
 # --- SDF ------------------------------------------------------------------------------
 
-# Runs libsdformat's cmdCheck, the function `ign sdf -k` calls, in a child process: it
+# `ign sdf -k FILE` is ign-tools' ruby glue loading libsdformat12 and calling its
+# cmdCheck(FILE) (cmdsdformat12.rb). The glue's start is twice the check of a model
+# file, so the files are checked here by that same call, many in one child process: it
 # prints to the C++ streams and may abort, neither of which may touch this process.
+# Each file's output goes to a file of its own (fd 1 and 2 pointed there for the
+# call); the child reports each exit code on a line of its own stdout.
 _CMDCHECK = r"""
-import ctypes, sys
+import ctypes, os, sys
 try:
     lib = ctypes.CDLL(sys.argv[1])
 except OSError as e:
-    print("not installed: %s" % e)
+    print("not installed: %s" % e, file=sys.stderr)
     sys.exit(127)
 lib.cmdCheck.argtypes = [ctypes.c_char_p]
 lib.cmdCheck.restype = ctypes.c_int
-sys.stdout.flush()
-sys.exit(0 if lib.cmdCheck(sys.argv[2].encode()) == 0 else 1)
+flush_all = ctypes.CDLL(None).fflush
+codes = os.fdopen(os.dup(1), "w")
+for path, log in zip(sys.argv[2::2], sys.argv[3::2]):
+    fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    flush_all(None)
+    os.dup2(fd, 1)
+    os.dup2(fd, 2)
+    os.close(fd)
+    code = lib.cmdCheck(path.encode())
+    flush_all(None)
+    codes.write("%d\n" % code)
+    codes.flush()
 """
+_SDF_CHECK = "ign sdf -k (libsdformat12 cmdCheck)"
 
 
 def ign_sdf(path: Path, sdf_path: list[Path]) -> ExternalResult:
@@ -96,42 +110,86 @@ def ign_sdf(path: Path, sdf_path: list[Path]) -> ExternalResult:
     "Valid." in cases it could not check). Runs in an empty working directory so that
     model:// URIs resolve through SDF_PATH alone, as in Gazebo.
     """
-    path = Path(path).resolve()
+    return ign_sdf_files([path], sdf_path)[0]
+
+
+def ign_sdf_files(paths: list[Path], sdf_path: list[Path], workers: int = 1,
+                  done: Callable[[], None] | None = None) -> list[ExternalResult]:
+    """ign_sdf on each of `paths`, in `workers` child processes side by side, each
+    checking its share one file after another; the results in the order of `paths`.
+    A file whose check ends its process fails, and the files after it are checked in
+    a new one. `done` is called as each file's check ends."""
+    paths = [Path(p).resolve() for p in paths]
     env = dict(os.environ, SDF_PATH=os.pathsep.join(str(Path(p).resolve()) for p in sdf_path))
-    ign = shutil.which("ign")
-    if ign is not None and _ign_has_sdf(ign, os.environ.get("IGN_CONFIG_PATH", "")):
-        return _run_sdf_check("ign sdf -k", [ign, "sdf", "-k", str(path)], path, env)
-    if ign is None:
-        return _skipped("ign sdf -k", path, "`ign` not found on PATH", _SDF_HINT)
-    # ign-tools without the sdformat command: the library itself is the validator.
-    cmd = [sys.executable, "-c", _CMDCHECK, _SDFORMAT_LIBRARY, str(path)]
-    return _run_sdf_check("libsdformat12 cmdCheck (ign sdf -k)", cmd, path, env)
+    shares = [paths[k::workers] for k in range(max(1, min(workers, len(paths))))]
+    if len(shares) == 1:
+        checked = [_check_files(shares[0], env, done)]
+    else:
+        with ThreadPoolExecutor(max_workers=len(shares)) as pool:
+            checked = list(pool.map(lambda share: _check_files(share, env, done), shares))
+    by_path = {r.target: r for results in checked for r in results}
+    return [by_path[str(p)] for p in paths]
 
 
-@functools.lru_cache(maxsize=None)
-def _ign_has_sdf(ign: str, ign_config_path: str) -> bool:
-    """Whether `ign` knows the `sdf` command: ign-tools finds commands through yaml files
-    in its own share folder and IGN_CONFIG_PATH, hence the cache key."""
+def _check_files(paths: list[Path], env: dict, done: Callable[[], None] | None) -> list[ExternalResult]:
+    results: list[ExternalResult] = []
+
+    def verdict(r: ExternalResult) -> None:
+        results.append(r)
+        if done is not None:
+            done()
+
+    with tempfile.TemporaryDirectory() as cwd, tempfile.TemporaryDirectory() as logs:
+        while len(results) < len(paths):
+            rest = paths[len(results):]
+            log_files = [Path(logs) / f"{len(results) + i}.txt" for i in range(len(rest))]
+            cmd = [sys.executable, "-c", _CMDCHECK, _SDFORMAT_LIBRARY,
+                   *(str(a) for pair in zip(rest, log_files) for a in pair)]
+            stderr = Path(logs) / "stderr.txt"
+            try:
+                with open(stderr, "wb") as err:
+                    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=err, env=env, cwd=cwd, text=True)
+            except OSError as e:
+                for p in rest:
+                    verdict(ExternalResult(_SDF_CHECK, str(p), "failed", (f"could not run: {e}",), _SDF_HINT))
+                break
+            timeout = _TIMEOUT_S + 10 * len(rest)
+            timed_out = threading.Event()
+            watchdog = threading.Timer(timeout, lambda: (timed_out.set(), proc.kill()))
+            watchdog.start()
+            try:
+                codes = 0
+                for path, log, line in zip(rest, log_files, proc.stdout):
+                    verdict(_sdf_verdict(path, _read_log(log), int(line)))
+                    codes += 1
+                code = proc.wait()
+            finally:
+                watchdog.cancel()
+                proc.stdout.close()
+            if code == 127 and _read_log(stderr).startswith("not installed"):
+                why = _read_log(stderr).strip().splitlines()[0]
+                for p in rest:
+                    verdict(_skipped(_SDF_CHECK, p, why, _SDF_HINT))
+                break
+            if codes < len(rest):  # the check of the next file ended the process
+                ended = (f"timed out after {timeout} s" if timed_out.is_set()
+                         else f"the check ended its process (exit code {code})")
+                verdict(_sdf_verdict(rest[codes], _read_log(log_files[codes]) + "\n" + ended, code or -1))
+    return results
+
+
+def _read_log(path: Path) -> str:
     try:
-        out = subprocess.run([ign, "sdf", "--help"], capture_output=True, text=True, timeout=60)
-    except (OSError, subprocess.TimeoutExpired):
-        return False
-    return out.returncode == 0 and "cannot find" not in (out.stdout + out.stderr)
+        return path.read_text(errors="replace")
+    except OSError:
+        return ""
 
 
-def _run_sdf_check(name: str, cmd: list[str], path: Path, env: dict) -> ExternalResult:
-    with tempfile.TemporaryDirectory() as cwd:
-        try:
-            out = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd, timeout=_TIMEOUT_S)
-        except (OSError, subprocess.TimeoutExpired) as e:
-            return ExternalResult(name, str(path), "failed", (f"could not run: {e}",), _SDF_HINT)
-    text = _ANSI.sub("", out.stdout + out.stderr)
+def _sdf_verdict(path: Path, text: str, code: int) -> ExternalResult:
+    text = _ANSI.sub("", text)
+    ok = code == 0 and "Error" not in text and "Valid." in text
     lines = tuple(line.strip() for line in text.splitlines() if line.strip())
-    if out.returncode == 127 and text.startswith("not installed"):
-        return _skipped(name, path, lines[0], _SDF_HINT)
-    ok = out.returncode == 0 and "Error" not in text and "Valid." in text
-    return ExternalResult(name, str(path), "passed" if ok else "failed",
-                          lines if not ok else (), _SDF_HINT)
+    return ExternalResult(_SDF_CHECK, str(path), "passed" if ok else "failed", lines if not ok else (), _SDF_HINT)
 
 
 # sdformat 12 builds a fresh copy of its whole spec for every <include> it loads, so a
@@ -177,11 +235,10 @@ def ign_sdf_world(path: Path, sdf_path: list[Path], part_includes: int = WORLD_P
     runs = [list(range(i, min(i + part_includes, len(includes)))) for i in range(0, len(includes), part_includes)]
     runs = runs or [[]]
     with tempfile.TemporaryDirectory() as folder:
-        parts = [Path(folder) / f"{path.stem}.part{k}.sdf" for k in range(1, len(runs) + 1)]
+        parts = [Path(folder).resolve() / f"{path.stem}.part{k}.sdf" for k in range(1, len(runs) + 1)]
         for part, run in zip(parts, runs):
             _write_part(reduced, run, part)
-        with ThreadPoolExecutor(max_workers=max(1, workers)) as pool:
-            results = list(pool.map(lambda p: ign_sdf(p, sdf_path), parts))
+        results = ign_sdf_files(parts, sdf_path, workers)
     name = results[0].validator + (f", on {stand_in}" if stand_in else "")
     if len(parts) > 1:
         name += f", in {len(parts)} parts of up to {part_includes} includes"

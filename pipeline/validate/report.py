@@ -35,6 +35,7 @@ REPORT_FORMAT = 1
 _LOD_VARIANT = re.compile(r"^(?P<base>.+)__lod\d+$")
 # Two subprocess validators at a time: the machine running CI is often small.
 _WORKERS = 2
+_SDF_PROCESSES = 2  # the model files' sdformat checks: two children, each checking half
 
 
 # --- gathering ------------------------------------------------------------------------
@@ -119,13 +120,22 @@ class _Clock:
             self.progress.add(steps)
 
     def run(self, key: str, fn, *args):
+        try:
+            return self.time(key, fn, *args)
+        finally:
+            self.step(key)
+
+    def time(self, key: str, fn, *args):
+        """fn(*args), timed and not a step (its steps are its own)."""
         t = time.perf_counter()
         try:
             return fn(*args)
         finally:
             self.seconds[key] = self.seconds.get(key, 0.0) + time.perf_counter() - t
-            if self.progress is not None:
-                self.progress.step(key)
+
+    def step(self, key: str) -> None:
+        if self.progress is not None:
+            self.progress.step(key)
 
 
 def _usd_references(path: Path) -> external.ExternalResult:
@@ -160,11 +170,11 @@ def _run_external(out: Path, sdf: list[Path], world: Path | None, usd: list[Path
         alike.setdefault((digests or {}).get(str(p)) or str(p), []).append(p)
 
     with ThreadPoolExecutor(max_workers=_WORKERS) as pool:
-        # ign sdf (a subprocess each) and the COLLADA schema run beside USD, which
-        # stays on this thread: pxr stages are not shared across threads here.
-        sdf_jobs = {pool.submit(clock.run, "ign sdf", external.ign_sdf, p, [models]): p for p in sdf}
-        if world:
-            sdf_jobs[pool.submit(clock.run, "ign sdf", external.ign_sdf_world, world, [models])] = world
+        # ign sdf (child processes checking many files each) and the COLLADA schema run
+        # beside USD, which stays on this thread: pxr stages are not shared across threads here.
+        sdf_job = pool.submit(clock.time, "ign sdf", external.ign_sdf_files, sdf, [models], _SDF_PROCESSES,
+                              lambda: clock.step("ign sdf"))
+        world_job = pool.submit(clock.run, "ign sdf", external.ign_sdf_world, world, [models]) if world else None
         dae_jobs = {pool.submit(clock.run, "collada schema", external.collada_schema, same[0]): same
                     for same in alike.values()}
         for p in usd + ([scene_usd] if scene_usd else []):
@@ -173,8 +183,10 @@ def _run_external(out: Path, sdf: list[Path], world: Path | None, usd: list[Path
             add(scene_usd, clock.run("usd validation", _usd_references, scene_usd))
         for p, r in zip(glb, clock.run("gltf validator", external.gltf_validator, glb)):
             add(p, r)
-        for fut, p in sdf_jobs.items():
-            add(p, fut.result())
+        for p, r in zip(sdf, sdf_job.result()):
+            add(p, r)
+        if world_job:
+            add(world, world_job.result())
         for fut, same in dae_jobs.items():
             r = fut.result()
             for p in same:

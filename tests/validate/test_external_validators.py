@@ -80,6 +80,52 @@ def test_sdf_include_resolves_only_through_sdf_path(package, tmp_path):
     assert any(f"model://{asset.id}" in m for m in missing.messages)
 
 
+def test_files_checked_in_one_process_get_the_verdicts_each_gets_alone(package, tmp_path):
+    """Many files through one child each of two (each checking its share one after
+    another): every file gets the verdict and the messages of a check of its own, a
+    failing file's errors stay its own, and the files after it still pass."""
+    parent, asset = package
+    text = (parent / asset.id / "model.sdf").read_text()
+    bodies = [text, text.replace("<child>arm</child>", "<child>no_such_link</child>"), text,
+              text.replace('version="1.9"', 'version="1.10"', 1), text]
+    files = []
+    for k, body in enumerate(bodies):
+        files.append(tmp_path / f"m{k}.sdf")
+        files[-1].write_text(body)
+    alone = [external.ign_sdf(f, [parent]) for f in files]
+    _require_sdf(alone[0])
+    steps = []
+    together = external.ign_sdf_files(files, [parent], workers=2, done=lambda: steps.append(1))
+    assert [r.status for r in alone] == ["passed", "failed", "passed", "failed", "passed"]
+    assert together == alone and len(steps) == len(files)
+
+
+# Stands in for libsdformat's check: says which file it checks, and ends its process on
+# a file named crash.
+_ABORTING_CHECK = r"""
+import os, sys
+codes = os.fdopen(os.dup(1), "w")
+for path, log in zip(sys.argv[2::2], sys.argv[3::2]):
+    with open(log, "w") as f:
+        f.write("Checking %s\n" % path)
+    if path.endswith("crash.sdf"):
+        os.abort()
+    with open(log, "a") as f:
+        f.write("Valid.\n")
+    codes.write("0\n")
+    codes.flush()
+"""
+
+
+def test_a_check_that_ends_its_process_fails_its_file_and_the_rest_are_checked(tmp_path, monkeypatch):
+    monkeypatch.setattr(external, "_CMDCHECK", _ABORTING_CHECK)
+    files = [tmp_path / name for name in ("a.sdf", "crash.sdf", "b.sdf", "c.sdf")]
+    results = external.ign_sdf_files(files, [tmp_path])
+    assert [r.status for r in results] == ["passed", "failed", "passed", "passed"]
+    assert [r.target for r in results] == [str(f) for f in files]
+    assert results[1].messages == (f"Checking {files[1]}", "the check ended its process (exit code -6)")
+
+
 def _world(path, model: str, names: list[str], extra: str = "", uris: dict | None = None):
     includes = "".join(f"<include><uri>model://{(uris or {}).get(n, model)}</uri><name>{n}</name>"
                        f"<pose>{k} 0 0 0 0 0</pose></include>" for k, n in enumerate(names))
@@ -291,7 +337,8 @@ def test_usd_errors_inside_instances_are_found_once_per_prototype(tmp_path):
 
 def test_missing_tools_are_skipped_with_install_hint(package, tmp_path, monkeypatch):
     parent, asset = package
-    monkeypatch.setenv("PATH", "")
+    monkeypatch.setenv("PATH", "")  # no node
+    monkeypatch.setattr(external, "_SDFORMAT_LIBRARY", "libsdformat12-absent.so.12")
     sdf = external.ign_sdf(parent / asset.id / "model.sdf", [parent])
     glb = tmp_path / "x.glb"
     glb.write_bytes(_glb({"asset": {"version": "2.0"}}))
