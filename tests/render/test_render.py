@@ -164,6 +164,20 @@ def test_a_sun_in_the_frame_saturates_a_disc_around_it_not_the_frame():
     assert disc[120, 160] == pytest.approx(expected, rel=0.05) and disc[0, 0] < expected / 100
 
 
+@pytest.mark.parametrize("a_shape, b_shape, mode", [((72, 96, 3), (143, 191, 1), "same"),
+                                                     ((480, 640, 3), (959, 1279, 1), "same"),
+                                                     ((83, 109), (11, 11), "valid"), ((97, 131), (29, 29), "valid")])
+def test_the_glares_convolution_is_scipys_fftconvolve_bit_for_bit(a_shape, b_shape, mode):
+    """The frame's and the sun's halo (fft_convolve) are what scipy.signal.fftconvolve
+    gives for them, to the last bit: a frame's pixels do not change with the import."""
+    from scipy.signal import fftconvolve
+
+    rng = np.random.default_rng(len(a_shape) + a_shape[0])
+    a, b = rng.random(a_shape) * 3.0, rng.random(b_shape) ** 4
+    axes = {"axes": (0, 1)} if len(a_shape) == 3 else {}
+    assert np.array_equal(sensor.fft_convolve(a, b, mode), fftconvolve(a, b, mode=mode, **axes))
+
+
 def test_a_sun_behind_the_camera_set_or_occluded_adds_nothing():
     cam = sensor.PhoneCamera()
     behind = -sun_through(WIDE, 160.0, 120.0)
