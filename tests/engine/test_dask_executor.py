@@ -166,7 +166,7 @@ def test_ctrl_c_closes_the_cluster(src, tmp_path):
     script = ("import sys, toy_graph; from pathlib import Path; from pipeline.engine.scheduler import Scheduler; "
               "from pipeline.engine.dask_executor import dask_pool; "
               "src, out = Path(sys.argv[1]), Path(sys.argv[2]); "
-              "Scheduler(out, jobs=2, executor=dask_pool).run(toy_graph.tasks(src, out, delay=2.0))")
+              "Scheduler(out, jobs=2, executor=dask_pool).run(toy_graph.tasks(src, out, delay=30.0))")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "tests"), str(ROOT)])}
     proc = subprocess.Popen([sys.executable, "-c", script, str(src), str(out)], env=env, start_new_session=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
