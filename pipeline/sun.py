@@ -44,9 +44,10 @@ def ephemeris(lat: float, lon: float, when: dt.datetime, refraction: bool = Fals
 
     if when.tzinfo is None:
         raise ValueError("when must be timezone-aware")
-    obs = _observer(lat, lon)
-    return (float(astral.sun.elevation(obs, when, with_refraction=refraction)),
-            float(astral.sun.azimuth(obs, when)))
+    # one solar position for both: astral's elevation and azimuth each compute it (its
+    # azimuth is taken before the refraction, which changes the zenith only)
+    zenith, azimuth = astral.sun.zenith_and_azimuth(_observer(lat, lon), when, with_refraction=refraction)
+    return float(90.0 - zenith), float(azimuth)
 
 
 @lru_cache(maxsize=64)

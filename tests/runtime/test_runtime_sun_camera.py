@@ -29,6 +29,24 @@ def test_ephemeris_within_0_02_deg_of_spa_over_a_year():
     assert err.max() < 0.02, err.max()
 
 
+@pytest.mark.parametrize("refraction", [False, True])
+def test_ephemeris_is_astrals_elevation_and_azimuth_to_the_bit(refraction):
+    """One solar position for both angles gives what astral's elevation() and
+    azimuth() give called one by one, on any latitude, longitude and time."""
+    import random
+
+    import astral
+    import astral.sun
+
+    rng = random.Random(7)
+    for _ in range(2000):
+        lat, lon = rng.uniform(-89.9, 89.9), rng.uniform(-180.0, 180.0)
+        when = dt.datetime(2025, 1, 1, tzinfo=dt.timezone.utc) + dt.timedelta(seconds=rng.uniform(0.0, 3.2e7))
+        observer = astral.Observer(latitude=lat, longitude=lon, elevation=0.0)
+        alone = (astral.sun.elevation(observer, when, with_refraction=refraction), astral.sun.azimuth(observer, when))
+        assert sun.ephemeris(lat, lon, when, refraction) == alone
+
+
 def test_irradiance_formula_and_horizon():
     e = math.radians(40.0)
     assert sun.irradiance(e, 0.2) == pytest.approx(1361 * math.exp(-0.2 / math.sin(e)) * math.sin(e))
