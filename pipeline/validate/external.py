@@ -80,6 +80,8 @@ class ExternalResult:
 # call); the child reports each exit code on a line of its own stdout.
 _CMDCHECK = r"""
 import ctypes, os, sys
+codes = os.fdopen(os.dup(1), "w")
+os.dup2(2, 1)  # whatever else is printed is not a code
 try:
     lib = ctypes.CDLL(sys.argv[1])
 except OSError as e:
@@ -88,7 +90,6 @@ except OSError as e:
 lib.cmdCheck.argtypes = [ctypes.c_char_p]
 lib.cmdCheck.restype = ctypes.c_int
 flush_all = ctypes.CDLL(None).fflush
-codes = os.fdopen(os.dup(1), "w")
 for path, log in zip(sys.argv[2::2], sys.argv[3::2]):
     fd = os.open(log, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     flush_all(None)
