@@ -28,9 +28,9 @@ _HELD: dict[str, int] = {}  # folder -> the descriptor that holds its lock
 OWNER_LOCK = ".owner"
 
 
-def pool_folder(prefix: str = "twin_pool_") -> str:
-    """A fresh folder in the system temp folder for a pool's workers (remove_with)."""
-    return _locked_folder(prefix, None)
+def pool_folder(prefix: str = "twin_pool_", parent: str | None = None) -> str:
+    """A fresh folder in `parent` (the system temp folder) for a pool's workers (remove_with)."""
+    return _locked_folder(prefix, parent)
 
 
 def remove_with(owner: object, folder: str) -> None:
