@@ -163,8 +163,12 @@ def test_ctrl_c_closes_the_cluster(src, tmp_path):
     """SIGINT to the build's process group (as the terminal's Ctrl-C) while tasks
     run: the build ends and no worker process outlives it."""
     out = tmp_path / "build"
-    script = ("import sys, toy_graph; from pathlib import Path; from pipeline.engine.scheduler import Scheduler; "
-              "from pipeline.engine.dask_executor import dask_pool; "
+    # the build says how it found Ctrl-C set, and dumps its threads' stacks on SIGUSR1:
+    # what a build that outlives the signal was doing (it did once in a full run)
+    script = ("import faulthandler, signal, sys, toy_graph; from pathlib import Path; "
+              "from pipeline.engine.scheduler import Scheduler; from pipeline.engine.dask_executor import dask_pool; "
+              "faulthandler.register(signal.SIGUSR1, all_threads=True); "
+              "print('SIGINT at start:', signal.getsignal(signal.SIGINT), file=sys.stderr, flush=True); "
               "src, out = Path(sys.argv[1]), Path(sys.argv[2]); "
               "Scheduler(out, jobs=2, executor=dask_pool).run(toy_graph.tasks(src, out, delay=30.0))")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "tests"), str(ROOT)])}
@@ -179,8 +183,15 @@ def test_ctrl_c_closes_the_cluster(src, tmp_path):
     workers = {p.pid for p in build.children(recursive=True)}
     assert len(workers) >= 2
     os.killpg(proc.pid, signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode != 0 and b"KeyboardInterrupt" in err
+    try:
+        _, err = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        os.kill(proc.pid, signal.SIGUSR1)
+        time.sleep(2.0)
+        os.killpg(proc.pid, signal.SIGKILL)
+        _, err = proc.communicate()
+        pytest.fail(f"the build outlived Ctrl-C by 120 s:\n{err.decode(errors='replace')[-6000:]}")
+    assert proc.returncode != 0 and b"KeyboardInterrupt" in err, err.decode(errors="replace")[-6000:]
     assert b"Dask Worker process" not in err  # the workers leave Ctrl-C to the build: no trace of theirs
     assert _gone(workers)
 
