@@ -1,6 +1,7 @@
 """Mesh and STEP readers: units, up axis, bad files -> UserError naming the file."""
 
 import os
+import signal
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -23,6 +24,7 @@ def cfg(path, units=None, up=None, tol=0.001, scale=1.0, max_triangles=1_000_000
 def step_box_mm_yup(path):
     """A 100 x 200 x 300 mm box at (10, 20, 30) mm, written by gmsh (mm): Y is up."""
     gmsh = pytest.importorskip("gmsh")
+    sigint = signal.getsignal(signal.SIGINT)  # initialize sets it to SIG_DFL, and finalize does not put it back
     gmsh.initialize()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -32,6 +34,7 @@ def step_box_mm_yup(path):
         gmsh.write(str(path))
     finally:
         gmsh.finalize()
+        signal.signal(signal.SIGINT, sigint)
 
 
 def test_step_mm_yup_lands_in_metres_zup(tmp_path):
@@ -286,6 +289,7 @@ def relabel_step(text: str, unit: str, which: int | None = None) -> str:
 def gmsh_step(path: Path, build) -> None:
     """A STEP file (millimetres) of the shapes `build(occ)` adds, written by gmsh."""
     gmsh = pytest.importorskip("gmsh")
+    sigint = signal.getsignal(signal.SIGINT)  # initialize sets it to SIG_DFL, and finalize does not put it back
     gmsh.initialize()
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -295,6 +299,7 @@ def gmsh_step(path: Path, build) -> None:
         gmsh.write(str(path))
     finally:
         gmsh.finalize()
+        signal.signal(signal.SIGINT, sigint)
 
 
 @pytest.fixture(scope="module")
