@@ -193,7 +193,8 @@ def fft_convolve(a: np.ndarray, b: np.ndarray, mode: str) -> np.ndarray:
     """The linear convolution of real `a` and `b` over their first two axes (b's other
     axes of length 1 or a's), "same" (a's shape) or "valid" (where b lies wholly in a),
     by scipy.fft: the steps of scipy.signal.fftconvolve for these inputs, and its bits,
-    without the import of scipy.signal (most of a second in every process that renders)."""
+    without importing scipy.signal, which imports scipy.stats: a cost to every process
+    that renders."""
     from scipy import fft
 
     full = [a.shape[i] + b.shape[i] - 1 for i in (0, 1)]
