@@ -47,9 +47,9 @@ def pytest_collection_finish(session):
     failed build is recorded by made_once for every asker to report."""
     if any("sample_build" in getattr(item, "fixturenames", ()) for item in session.items):
         factory = session.config._tmp_path_factory
-        # The worker's base folder is made here, before the thread starts: its first
-        # getbasetemp() empties the folder, without a lock, and made in the thread it
-        # emptied a module fixture's folder that the first test had just made.
+        # The worker's base folder is made here, before the thread starts: the first
+        # getbasetemp() empties the folder, without a lock, so made in the thread it can
+        # empty the folder of a module fixture that the first test is making.
         factory.getbasetemp()
         threading.Thread(target=_build_quietly, args=(factory,), name="sample-build", daemon=True).start()
 

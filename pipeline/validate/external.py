@@ -73,7 +73,7 @@ class ExternalResult:
 # --- SDF ------------------------------------------------------------------------------
 
 # `ign sdf -k FILE` is ign-tools' ruby glue loading libsdformat12 and calling its
-# cmdCheck(FILE) (cmdsdformat12.rb). The glue's start is twice the check of a model
+# cmdCheck(FILE) (cmdsdformat12.rb). Starting the glue costs more than checking a model
 # file, so the files are checked here by that same call, many in one child process: it
 # prints to the C++ streams and may abort, neither of which may touch this process.
 # Each file's output goes to a file of its own (fd 1 and 2 pointed there for the
@@ -167,8 +167,9 @@ def _check_files(paths: list[Path], env: dict, done: Callable[[], None] | None) 
             finally:
                 watchdog.cancel()
                 proc.stdout.close()
-            if code == 127 and _read_log(stderr).startswith("not installed"):
-                why = _read_log(stderr).strip().splitlines()[0]
+            said = _read_log(stderr) if code == 127 else ""
+            if said.startswith("not installed"):
+                why = said.strip().splitlines()[0]
                 for p in rest:
                     verdict(_skipped(_SDF_CHECK, p, why, _SDF_HINT))
                 break
