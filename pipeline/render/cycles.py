@@ -74,7 +74,9 @@ class CyclesScene:
         self.objects: dict[str, dict[str, object]] = {}  # tag -> visual name -> object
         self.prototypes: dict[str, str] = {}  # asset -> tag imported first
         self._rest: dict[str, dict[str, object]] = {}  # tag -> link -> rest matrix_basis (set_joints)
-        # tag -> hidden from renders, as imported, copied or last shown (show_only)
+        # tag -> the collection of its objects, excluded from the view layer while the
+        # placement is hidden (show_only), and whether it is
+        self._collections: dict[str, object] = {}
         self._hidden: dict[str, bool] = {}
         self._hierarchy: dict[str, list] = {}  # an imported root's name -> it and its descendants, in order
         self.wires: conductors.CyclesWires | None = None  # the spans (load_terrain), always shown
@@ -149,14 +151,14 @@ class CyclesScene:
             return
         p = self.site.placement(tag)
         glb = self.site.build / "models" / p["asset"] / f"{p['asset']}.glb"
+        collection = self.bpy.data.collections.new(tag)
+        self.scene.collection.children.link(collection)
         if p["asset"] in self.prototypes:
-            prototype = self.prototypes[p["asset"]]
-            root, objs = self._copy(self.roots[prototype])
-            self._hidden[tag] = self._hidden[prototype]  # a copy is hidden as its prototype is
+            root, objs = self._copy(self.roots[self.prototypes[p["asset"]]], collection)
         else:
-            root, objs = self._import(glb)
+            root, objs = self._import(glb, collection)
             self.prototypes[p["asset"]] = tag
-            self._hidden[tag] = False
+        self._collections[tag], self._hidden[tag] = collection, False
         root.matrix_world = _matrix(self.bpy, self.site.pose(p))
         # Children's world matrices are stale until the view layer updates; setting one
         # before that would be relative to the parent's old pose.
@@ -167,14 +169,16 @@ class CyclesScene:
     def load_terrain(self) -> None:
         """The site's fixed furniture: the ground and the conductors strung over it."""
         if self.site.terrain and "__terrain__" not in self.roots:
-            root, objs = self._import(self.site.build / "models" / self.site.terrain / f"{self.site.terrain}.glb")
+            root, objs = self._import(self.site.build / "models" / self.site.terrain / f"{self.site.terrain}.glb",
+                                      self.scene.collection)
             self.roots["__terrain__"], self.objects["__terrain__"] = root, objs
-            self._hidden["__terrain__"] = False
         if self.wires is None:
             wires = conductors.load(self.site.build)
             self.wires = None if wires is None else conductors.CyclesWires(self.bpy, self.scene.collection, wires)
 
-    def _import(self, glb: Path):
+    def _import(self, glb: Path, collection):
+        """A package's objects, in `collection` (the glTF importer links them to the
+        scene's own collection), and its root."""
         bpy = self.bpy
         before = set(bpy.data.objects)
         # Close-ups draw LOD 0. Blender imports MSFT_lod's out-of-scene nodes as extra
@@ -186,7 +190,11 @@ class CyclesScene:
             glb = self.tmp / glb.name
             glb_file.write(glb, scene_only, binary)
         bpy.ops.import_scene.gltf(filepath=str(glb))
-        new = [o for o in bpy.data.objects if o not in before]
+        new = [o for o in self.scene.collection.objects if o not in before]  # in the order linked
+        if collection != self.scene.collection:
+            for o in new:
+                collection.objects.link(o)
+                self.scene.collection.objects.unlink(o)
         glass = {m.name for m in {sl.material for o in new for sl in o.material_slots if sl.material is not None}
                  if _tune_material(m)}
         for o in new:
@@ -201,14 +209,15 @@ class CyclesScene:
         self._hierarchy[root.name] = [root, *root.children_recursive]
         return root, objs
 
-    def _copy(self, root):
-        """Linked duplicate of an imported hierarchy; shape-keyed meshes get own data."""
+    def _copy(self, root, collection):
+        """Linked duplicate of an imported hierarchy, in `collection`; shape-keyed meshes
+        get own data."""
         mapping = {}
         for o in self._hierarchy[root.name]:
             c = o.copy()
             if o.type == "MESH" and o.data.shape_keys is not None:
                 c.data = o.data.copy()
-            self.scene.collection.objects.link(c)
+            collection.objects.link(c)
             mapping[o] = c
         for o, c in mapping.items():
             if o.parent is not None:
@@ -357,19 +366,19 @@ class CyclesScene:
 
     def show_only(self, tags) -> None:
         """Render just these placements (and the terrain): a frame's content is its own
-        culled set, whatever else the scene holds. Only placements whose visibility
-        changes are touched: each assignment runs Blender's visibility update over the
-        whole scene, so setting every object of a site's scene for every frame cost more
-        than rendering it. (A single foreach_set of the flags is faster still, but gave
-        other pixels than these assignments on the sample: not used.)"""
-        keep = set(tags) | {"__terrain__"}
-        for tag, objs in self.objects.items():
+        culled set, whatever else the scene holds. A hidden placement's collection is
+        excluded from the view layer rather than its objects hidden from renders: an
+        object hidden from renders is still in every dependency graph Blender builds,
+        and a render builds two (the picture and the label pass), so a scene holding
+        many placements a frame does not see would cost each frame in proportion to all
+        of them. Only placements whose visibility changes are touched."""
+        keep = set(tags)
+        layers = self.bpy.context.view_layer.layer_collection.children
+        for tag, collection in self._collections.items():
             hide = tag not in keep
-            if self._hidden.get(tag) is hide:
-                continue
-            for ob in objs.values():
-                ob.hide_render = hide
-            self._hidden[tag] = hide
+            if self._hidden[tag] is not hide:
+                layers[collection.name].exclude = hide
+                self._hidden[tag] = hide
 
     def set_joints(self, tag: str, manifest: dict, values: dict[str, float]) -> None:
         """Revolute joints of a placement at `values` (rad): each child link's node

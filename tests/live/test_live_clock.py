@@ -146,8 +146,9 @@ def test_show_only_hides_exactly_the_other_placements(tmp_path):
         assert seen() == {1, 2}
         scene.sun.hide_render, moon = True, scene.moon.hide_render
 
-        def hidden():
-            return {tag: {ob.hide_render for ob in objs.values()} for tag, objs in scene.objects.items()}
+        def hidden():  # out of the view layer, the objects a render's dependency graph holds
+            shown = set(scene.bpy.context.view_layer.objects)
+            return {tag: {ob not in shown for ob in objs.values()} for tag, objs in scene.objects.items()}
 
         both = scene.render()
         scene.show_only(["R-1"])
