@@ -78,6 +78,8 @@ class CyclesScene:
         # placement is hidden (show_only), and whether it is
         self._collections: dict[str, object] = {}
         self._hidden: dict[str, bool] = {}
+        self._placements = bpy.data.collections.new("placements")  # the placements' collections
+        s.collection.children.link(self._placements)
         self._hierarchy: dict[str, list] = {}  # an imported root's name -> it and its descendants, in order
         self.wires: conductors.CyclesWires | None = None  # the spans (load_terrain), always shown
         self._frame_image = None  # the rendered file as Blender reads it (render)
@@ -130,8 +132,9 @@ class CyclesScene:
     def load_many(self, tags) -> None:
         """`load` each tag, the view layer updated once at the end: an update costs time
         in proportion to the scene, so one per placement grows with the square of a
-        site's size. The first placement of each asset comes first: the glTF importer
-        updates the view layer at each of its steps, cheap while the scene is small."""
+        site's size. The first placement of each asset comes first, and the placements
+        are out of the view layer while they load: the glTF importer updates the view
+        layer at each of its steps, cheap when it holds little more than the import."""
         tags = list(tags)
         assets = {self.site.placement(t)["asset"] for t in self.roots}
         first = []
@@ -141,9 +144,16 @@ class CyclesScene:
                 assets.add(asset)
                 first.append(tag)
         leading = set(first)
-        for tag in first + [t for t in tags if t not in leading]:
-            self.load(tag, update=False)
+        self._placements_layer().exclude = True
+        try:
+            for tag in first + [t for t in tags if t not in leading]:
+                self.load(tag, update=False)
+        finally:  # Blender keeps the placements show_only excluded as they were
+            self._placements_layer().exclude = False
         self.bpy.context.view_layer.update()
+
+    def _placements_layer(self):
+        return self.bpy.context.view_layer.layer_collection.children[self._placements.name]
 
     def load(self, tag: str, update: bool = True) -> None:
         """Import a placement's built package (glTF) and put it at its ENU pose."""
@@ -152,7 +162,7 @@ class CyclesScene:
         p = self.site.placement(tag)
         glb = self.site.build / "models" / p["asset"] / f"{p['asset']}.glb"
         collection = self.bpy.data.collections.new(tag)
-        self.scene.collection.children.link(collection)
+        self._placements.children.link(collection)
         if p["asset"] in self.prototypes:
             root, objs = self._copy(self.roots[self.prototypes[p["asset"]]], collection)
         else:
@@ -373,7 +383,7 @@ class CyclesScene:
         many placements a frame does not see would cost each frame in proportion to all
         of them. Only placements whose visibility changes are touched."""
         keep = set(tags)
-        layers = self.bpy.context.view_layer.layer_collection.children
+        layers = self._placements_layer().children
         for tag, collection in self._collections.items():
             hide = tag not in keep
             if self._hidden[tag] is not hide:
