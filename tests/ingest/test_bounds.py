@@ -104,10 +104,10 @@ def test_a_run_plans_only_the_frames_it_renders(sample_build, tmp_path):
 
     from pipeline.datasets.plan import Planner
     from pipeline.runtime.site import load_site
-    from test_dataset import TINY, _scene_copy
+    from test_dataset import CLOSE_FIRST, _scene_copy
 
     config = tmp_path / "long.toml"
-    config.write_text(TINY.replace("count = 4", "count = 2000"))
+    config.write_text(CLOSE_FIRST.replace("count = 4", "count = 2000"))
     out = _scene_copy(sample_build, tmp_path / "build")
     proc = twin("dataset", config, "--out", out, "--frames", "1", timeout=1800)
     assert proc.returncode == 0, proc.stderr[-3000:]
