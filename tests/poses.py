@@ -97,7 +97,7 @@ def gltf_poses(glb: Path) -> dict[str, tuple[np.ndarray, float]]:
     from pipeline.geometry.transform import matrix_from_quaternion
 
     doc, binary = container.read(glb)
-    out = {}
+    out, visuals = {}, {}  # asset -> its model's visual node name -> model-frame pose
     for node in doc["nodes"]:
         inst = node.get("extensions", {}).get("EXT_mesh_gpu_instancing")
         if not inst or "tags" not in node.get("extras", {}):
@@ -106,8 +106,10 @@ def gltf_poses(glb: Path) -> dict[str, tuple[np.ndarray, float]]:
         visual = node["name"].split("/")[2]
         t = _acc(doc, binary, inst["attributes"]["TRANSLATION"])
         q = _acc(doc, binary, inst["attributes"]["ROTATION"])
-        model_doc, _ = container.read(glb.parent.parent / "models" / asset / f"{asset}.glb")
-        local = dict((model_doc["nodes"][i]["name"], m) for i, m in container.visual_nodes(model_doc))[visual]
+        if asset not in visuals:
+            model_doc, _ = container.read(glb.parent.parent / "models" / asset / f"{asset}.glb")
+            visuals[asset] = {model_doc["nodes"][i]["name"]: m for i, m in container.visual_nodes(model_doc)}
+        local = visuals[asset][visual]
         for tag, ti, qi in zip(node["extras"]["tags"], t, q):
             inst_m = matrix_from_quaternion(container.from_gltf_rotation(qi))
             inst_m[:3, 3] = ti
