@@ -126,6 +126,11 @@ static int send_mode(const std::string &world, unsigned timeout_ms) {
         const int wait_ms = first ? 10000 : answered ? 3000 : 500;
         for (int i = 0; i < wait_ms / 10 && !pub->HasConnections(); ++i)
           std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        // HasConnections() turns true when discovery reports the subscriber; the
+        // subscription itself reaches this publisher's socket on its own, a little
+        // later, and a message published in between is dropped (gz-transport#586):
+        // the first message of a topic waits for that too.
+        if (pub->HasConnections()) std::this_thread::sleep_for(std::chrono::milliseconds(200));
       }
       msgs::Double value;
       value.set_data(position);
