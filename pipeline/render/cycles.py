@@ -75,9 +75,8 @@ class CyclesScene:
         self.prototypes: dict[str, str] = {}  # asset -> tag imported first
         self._rest: dict[str, dict[str, object]] = {}  # tag -> link -> rest matrix_basis (set_joints)
         # tag -> the collection of its objects, excluded from the view layer while the
-        # placement is hidden (show_only), and whether it is
+        # placement is hidden (show_only)
         self._collections: dict[str, object] = {}
-        self._hidden: dict[str, bool] = {}
         self._placements = bpy.data.collections.new("placements")  # the placements' collections
         s.collection.children.link(self._placements)
         self._hierarchy: dict[str, list] = {}  # an imported root's name -> it and its descendants, in order
@@ -168,7 +167,7 @@ class CyclesScene:
         else:
             root, objs = self._import(glb, collection)
             self.prototypes[p["asset"]] = tag
-        self._collections[tag], self._hidden[tag] = collection, False
+        self._collections[tag] = collection
         root.matrix_world = _matrix(self.bpy, self.site.pose(p))
         # Children's world matrices are stale until the view layer updates; setting one
         # before that would be relative to the parent's old pose.
@@ -385,10 +384,9 @@ class CyclesScene:
         keep = set(tags)
         layers = self._placements_layer().children
         for tag, collection in self._collections.items():
-            hide = tag not in keep
-            if self._hidden[tag] is not hide:
-                layers[collection.name].exclude = hide
-                self._hidden[tag] = hide
+            layer, hide = layers[collection.name], tag not in keep
+            if layer.exclude != hide:
+                layer.exclude = hide
 
     def set_joints(self, tag: str, manifest: dict, values: dict[str, float]) -> None:
         """Revolute joints of a placement at `values` (rad): each child link's node

@@ -23,18 +23,7 @@ def cfg(path, units=None, up=None, tol=0.001, scale=1.0, max_triangles=1_000_000
 
 def step_box_mm_yup(path):
     """A 100 x 200 x 300 mm box at (10, 20, 30) mm, written by gmsh (mm): Y is up."""
-    gmsh = pytest.importorskip("gmsh")
-    sigint = signal.getsignal(signal.SIGINT)  # initialize sets it to SIG_DFL, and finalize does not put it back
-    gmsh.initialize()
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add("box")
-        gmsh.model.occ.addBox(10, 20, 30, 100, 200, 300)
-        gmsh.model.occ.synchronize()
-        gmsh.write(str(path))
-    finally:
-        gmsh.finalize()
-        signal.signal(signal.SIGINT, sigint)
+    gmsh_step(path, lambda occ: occ.addBox(10, 20, 30, 100, 200, 300))
 
 
 def test_step_mm_yup_lands_in_metres_zup(tmp_path):
