@@ -8,6 +8,7 @@ run (conftest's mini_build)."""
 from __future__ import annotations
 
 import hashlib
+import json
 import shutil
 import subprocess
 import sys
@@ -123,6 +124,9 @@ def test_two_gigabyte_sparse_mesh_is_refused_fast(case):
     # the bound is loose because the 2 cores are shared
     assert time.perf_counter() - t < 60, "the file was read"
     rejected(proc, out, before, "kiosk.stl")
+    # refused by its size before it was hashed for the task's key (the planner's refusal)
+    state = json.loads((out / ".state.json").read_text())
+    assert not [p for p in state["hashes"] if p.endswith("kiosk.stl")], state["hashes"]
 
 
 # --- .blend ------------------------------------------------------------------------------

@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .. import config, ir, site_frame
+from ..ingest import size
 from ..errors import UserError
 from ..files import atomic_write
 from ..engine.code import ROOT as CODE_ROOT, code_of
@@ -212,6 +213,7 @@ def plan(sources: Path, build: Path, only: list[str] | None = None, cache: Path 
             outputs=(f"{SOURCE_FOLDER}/{asset_id}/",),
             cost=cost,  # its chain's: the longest chains start first
             reads_in=cfg.folder.resolve(),  # textures, .bin, .mtl the reader opens through the source
+            problem=size.refusal(source),  # refused by stat: the file is never read, not even hashed
         ))
         p.tasks.append(Task(
             name=f"geometry:{asset_id}",

@@ -180,6 +180,9 @@ class Scheduler:
         digests: dict[str, str] = {}
         stale, names = [], set()
         for t in order:
+            if t.problem is not None:  # fails without running (never keyed: its input may be huge)
+                names.add(t.name)
+                continue
             if names.intersection(t.deps):
                 stale.append(t)
                 names.add(t.name)

@@ -22,7 +22,8 @@ from pathlib import Path
 from .. import ir
 from ..errors import UserError
 from . import tessellate
-from .mesh import _load, asset_from_trimesh, check_size
+from .mesh import _load, asset_from_trimesh
+from .size import check_size
 from .units import METRES, Frame, resolve
 
 _PREFIX = {b"": 1.0, b"EXA": 1e18, b"PETA": 1e15, b"TERA": 1e12, b"GIGA": 1e9, b"MEGA": 1e6, b"KILO": 1e3,

@@ -39,27 +39,13 @@ from .. import ir
 from ..errors import UserError
 from ..geometry.clean import apply_transform
 from .images import SourceFiles, is_image_name
+from .size import check_size
 from .textures import trimesh_textures, trimesh_uvs, with_textures
 from .units import Frame, resolve
 
-MAX_BYTES = 512 * 1024 * 1024
 SUFFIXES = (".stl", ".obj", ".ply", ".glb", ".gltf", ".dae")
 DEFAULT_MATERIAL = ir.Material("default")
 COLLADA_UP = {"X_UP": "X", "Y_UP": "Y", "Z_UP": "Z"}
-
-
-def check_size(path: Path) -> None:
-    """UserError for a missing file or one over 512 MB (checked by stat, never read)."""
-    try:
-        size = Path(path).stat().st_size
-    except FileNotFoundError:
-        raise UserError(path, None, "file not found") from None
-    except OSError as e:
-        raise UserError(path, None, f"cannot read: {e.strerror}") from None
-    if size > MAX_BYTES:
-        raise UserError(path, None, f"file is {size / 2**20:.0f} MB, over the {MAX_BYTES // 2**20} MB limit")
-    if size == 0:
-        raise UserError(path, None, "file is empty")
 
 
 def _safe_name(name: str, fallback: str) -> str:

@@ -344,3 +344,27 @@ def test_a_blend_records_the_external_image_it_reads_and_refuses_a_bomb(tmp_path
     (tmp_path / "textures" / "paint.png").write_bytes(png_header_only(30000, 30000))
     with pytest.raises(UserError, match=r"box.blend: image 'paint': a decompression bomb \(900,000,000 pixels\)"):
         read_blend_path(tmp_path / "box.blend", "box", "test")
+
+
+def test_the_planners_size_refusal_covers_the_readers_that_check_size(tmp_path):
+    """ingest.size.CHECKED_SUFFIXES names the suffixes whose readers refuse a file by its
+    size (read_mesh, read_cad): the planner refuses those before it hashes them, and
+    leaves a .blend, which has no size limit, to its reader."""
+    from pipeline.ingest import size
+    from pipeline.ingest.cad import read_cad
+    from pipeline.ingest.mesh import read_mesh
+    from pipeline.ingest.readers import READERS
+
+    checked = {s for s, reader in READERS.items() if reader in (read_mesh, read_cad)}
+    assert checked == set(size.CHECKED_SUFFIXES)
+    for name in ("big.STL", "big.step", "big.blend"):
+        path = tmp_path / name
+        with open(path, "wb") as f:
+            f.truncate(size.MAX_BYTES + 1)
+        refused = size.refusal(path)
+        if name.endswith(".blend"):
+            assert refused is None
+        else:
+            assert refused is not None and "over the 512 MB limit" in refused.message and refused.file == str(path)
+    (tmp_path / "fine.obj").write_text("v 0 0 0\n")
+    assert size.refusal(tmp_path / "fine.obj") is None
