@@ -41,16 +41,16 @@ validate: $(STAMP)
 # twenty slowest are listed at the end.
 TEST_WORKERS ?= auto
 # The suite makes and deletes tens of thousands of files (builds, renders, copies of
-# them), about 2 GB at its peak; on a disk filesystem the kernel's bookkeeping of them
-# is a good part of the run's CPU. Where /dev/shm (a filesystem in memory) has 6 GB to
-# spare, the tests' temporary folders go there (a folder per user); elsewhere, or with
-# TEST_TMPDIR= , they stay in TMPDIR. A passed run leaves none of its tests' files there
-# (tmp_path_retention_policy).
+# them); on a disk filesystem the kernel's bookkeeping of them is a good part of the
+# run's CPU. Where /dev/shm (a filesystem in memory) has room for a run's files and
+# margin (6 GB), the tests' temporary folders go there (a folder per user); elsewhere,
+# or with TEST_TMPDIR= , they stay in TMPDIR. A passed run leaves none of its tests'
+# files there (tmp_path_retention_policy).
 TEST_TMPDIR ?= $(shell avail=$$(df -Pk /dev/shm 2>/dev/null | awk 'NR == 2 {print $$4}'); \
 	[ -w /dev/shm ] && [ "$${avail:-0}" -ge 6291456 ] && echo /dev/shm/substation-twin-tests-$$(id -u))
 
 test: $(STAMP) $(TOOLS)
-	$(if $(TEST_TMPDIR),mkdir -p $(TEST_TMPDIR) && TMPDIR=$(TEST_TMPDIR)) \
+	tmp='$(TEST_TMPDIR)'; if [ -n "$$tmp" ]; then mkdir -p "$$tmp" && export TMPDIR="$$tmp"; fi; \
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --durations=20
 
 bench: $(STAMP) $(TOOLS)

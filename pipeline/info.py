@@ -13,6 +13,7 @@ from rich.table import Table
 from . import config
 from .digest import sha256_file
 from .errors import UserError
+from .ingest import size
 
 
 @dataclass
@@ -31,7 +32,11 @@ class InfoReport:
 
 
 def _triangles(cfg: config.AssetConfig, build: Path) -> int | None:
-    """LOD0 triangles: from a built manifest of the same source, else by reading it."""
+    """LOD0 triangles: from a built manifest of the same source, else by reading it. A
+    source its reader refuses by size is refused before it is hashed."""
+    refused = size.refusal(cfg.source)
+    if refused is not None:
+        raise refused
     manifest = build / "models" / cfg.id / "manifest.json"
     if manifest.is_file():
         data = json.loads(manifest.read_text())

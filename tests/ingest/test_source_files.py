@@ -368,3 +368,24 @@ def test_the_planners_size_refusal_covers_the_readers_that_check_size(tmp_path):
             assert refused is not None and "over the 512 MB limit" in refused.message and refused.file == str(path)
     (tmp_path / "fine.obj").write_text("v 0 0 0\n")
     assert size.refusal(tmp_path / "fine.obj") is None
+
+
+def test_twin_info_refuses_an_oversized_source_without_hashing_it(tmp_path, monkeypatch):
+    """`twin info` compares a source's hash with its built manifest's; a source over the
+    readers' limit is refused by its size first, never read."""
+    import mini_sources
+    from pipeline import info
+    from pipeline.ingest import size
+
+    sources = mini_sources.make(tmp_path / "src")
+    stl = sources / "assets" / "kiosk" / "kiosk.stl"
+    with open(stl, "r+b") as f:
+        f.truncate(size.MAX_BYTES + 1)  # sparse
+    manifest = tmp_path / "build" / "models" / "kiosk" / "manifest.json"
+    manifest.parent.mkdir(parents=True)
+    manifest.write_text(json.dumps({"source": {"sha256": "0" * 64}, "lods": [{"triangles": 12}]}))
+    hashed = []
+    monkeypatch.setattr(info, "sha256_file", lambda p: hashed.append(p) or "1" * 64)
+    report = info.gather(sources, tmp_path / "build")
+    assert [p for p in report.problems if "kiosk.stl" in p and "over the 512 MB limit" in p]
+    assert stl not in hashed and str(stl) not in map(str, hashed)
