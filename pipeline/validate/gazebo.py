@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -108,6 +109,20 @@ def _by_id(root) -> dict[str, etree._Element]:
     return {el.get("id"): el for el in root.iter() if el.get("id") is not None}
 
 
+# The text of a <p>: vertex indices (never negative) and XML's whitespace.
+_INDICES = re.compile(r"[0-9 \t\r\n]*")
+
+
+def _indices(text: str) -> np.ndarray:
+    """The int64 indices of a <p>'s text. Checked first, because numpy's text reader
+    stops at the first word it cannot read instead of failing, and saturates an index
+    too large for int64 (which then fails as out of range). A <p> is the largest text
+    of a file, and this reads it several times faster than split and convert."""
+    if not _INDICES.fullmatch(text):
+        raise ValueError("a <p> holds something other than vertex indices")
+    return np.fromstring(text, dtype=np.int64, sep=" ")
+
+
 def _floats(source, ids) -> np.ndarray:
     """(n, stride) float64 array of a <source>."""
     arr = source.find("{*}float_array")
@@ -130,7 +145,7 @@ def written_summary(path: Path) -> MeshSummary:
         count = int(tris.get("count", "0"))
         inputs = tris.findall("{*}input")
         stride = 1 + max(int(i.get("offset", "0")) for i in inputs)
-        p = np.array((tris.findtext("{*}p") or "").split(), dtype=np.int64)
+        p = _indices(tris.findtext("{*}p") or "")
         p = p[: count * 3 * stride].reshape(-1, stride)
         triangles += len(p) // 3
         for inp in inputs:

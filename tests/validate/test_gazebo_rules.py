@@ -94,3 +94,15 @@ def test_a_world_over_its_parse_budget_with_moving_parts_names_the_setting():
 def test_a_joint_dartsim_cannot_build_is_a_finding():
     found = gazebo.physics_findings("w.sdf", {"ok": True, "failed_shapes": 0, "failed_joints": 2})
     assert [f.code for f in found] == ["GZ011"] and "2 joints failed" in found[0].message
+
+
+@pytest.mark.parametrize("indices", ["0 1 -2", "0 1 2.0", "0 1 two", "0,1,2", "0 1 99999999999999999999"])
+def test_a_p_that_is_not_vertex_indices_is_a_finding_not_a_summary(indices, tmp_path):
+    """A negative index would wrap to the last vertex, and numpy's text reader stops at
+    a word it cannot read or saturates a huge number: each is GZ010, never a summary."""
+    path, _ = _written(tmp_path)
+    text = path.read_text()
+    start = text.index("<p>") + len("<p>")
+    path.write_text(text[:start] + indices + text[text.index("</p>"):])
+    found = gazebo.mesh_findings([path], {str(path): {"ok": True}}, str)
+    assert [f.code for f in found] == ["GZ010"], found
