@@ -98,7 +98,8 @@ def _viewer_rows(d):
                 "the scene .glb", f"{size['tiles']} tiles, meshes stored once per model and level")]
     page, globe = d.get("page"), d.get("globe")
     if page and globe:
-        note = "Chromium headless, WebGL on SwiftShader (CPU), 1280x800"
+        width, height = page["size_px"]
+        note = f"Chromium headless, WebGL on SwiftShader (CPU), {width}x{height}"
         out += [_row("viewer", "page load to first drawn frame", page["first_frame_s"], globe["first_frame_s"], "s",
                      "CesiumJS globe of the tiles", note),
                 _row("viewer", "browser memory (PSS)", page["pss_mb"], globe["pss_mb"], "MB",
