@@ -117,9 +117,11 @@ def _indices(text: str) -> np.ndarray:
     """The int64 indices of a <p>'s text, read by numpy's text reader (several times
     faster than split and convert). The text is checked first: the reader stops at the
     first word it cannot read instead of failing, and saturates an index too large for
-    int64 (which then fails as out of range)."""
+    int64 (which then fails as out of range); and it reads whitespace alone as one 0."""
     if not _INDICES.fullmatch(text):
         raise ValueError("a <p> holds something other than vertex indices")
+    if not text or text.isspace():
+        return np.zeros(0, dtype=np.int64)
     return np.fromstring(text, dtype=np.int64, sep=" ")
 
 

@@ -106,3 +106,12 @@ def test_a_p_that_is_not_vertex_indices_is_a_finding_not_a_summary(indices, tmp_
     path.write_text(text[:start] + indices + text[text.index("</p>"):])
     found = gazebo.mesh_findings([path], {str(path): {"ok": True}}, str)
     assert [f.code for f in found] == ["GZ010"], found
+
+
+def test_a_p_of_whitespace_alone_holds_no_triangles(tmp_path):
+    """numpy's text reader reads whitespace alone as one index 0; the summary has none."""
+    path, _ = _written(tmp_path)
+    text = path.read_text()
+    path.write_text(text[:text.index("<p>") + len("<p>")] + " \n  " + text[text.index("</p>"):])
+    written = gazebo.written_summary(path)
+    assert written.triangles == 0 and written.corners == 0
