@@ -6,7 +6,8 @@ its processes, and the JS heap), what the frame drew; the tileset's bytes agains
 the scene .glb's; and what writing the tiles and the page costs.
 
 SwiftShader renders on the CPU, so the times are an upper bound for a machine with a
-GPU and move with the machine's load (recorded beside them)."""
+GPU and move with the machine's load (recorded beside them); there the pages draw
+without multisampling and fog (viewer/static/renderer.js), as each run records."""
 
 from __future__ import annotations
 
@@ -58,10 +59,11 @@ def _page(built: Path, page: str, repeats: int, size) -> dict:
         runs.append({"first_frame_s": s["first_frame_ms"] / 1000.0, "ready_s": r["ready_ms"] / 1000.0,
                      "pss_mb": r["memory"]["pss_bytes"] / 2**20, "js_heap_mb": r["memory"]["js_heap_used_bytes"] / 2**20,
                      "phases_ms": s.get("phases_ms"), "load_average": load,
-                     **{k: s[k] for k in ("draw_calls", "triangles", "instances", "tiles_with_content", "commands")
-                        if k in s}})
+                     **{k: s[k] for k in ("draw_calls", "triangles", "instances", "tiles_with_content", "commands",
+                                          "antialias", "fog") if k in s}})
     return {"runs": runs, "first_frame_s": statistics.median(r["first_frame_s"] for r in runs),
-            "pss_mb": statistics.median(r["pss_mb"] for r in runs), "size_px": list(size), "webgl": "SwiftShader"}
+            "pss_mb": statistics.median(r["pss_mb"] for r in runs), "size_px": list(size),
+            "webgl": r.get("webgl") or "SwiftShader"}
 
 
 def _writers(ctx: Context, built: Path) -> dict:

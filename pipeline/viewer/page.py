@@ -29,7 +29,7 @@ from . import sun_table
 
 STATIC = Path(__file__).resolve().parent / "static"
 PAGES = ("index.html", "globe.html")
-APP = ("viewer.js", "globe.js", "twin.css")
+APP = ("viewer.js", "globe.js", "renderer.js", "twin.css")
 BINDING_KEYS = ("variable", "effect", "target", "link", "domain", "range", "axis", "shape_key", "materials", "thresholds",
                 "rest_pose")
 

@@ -384,6 +384,8 @@ def test_viewer_draws_every_placement_without_errors(viewer_page, mini):
     assert result["stats"]["instances"] == result["stats"]["placements"] == len(mini_sources.PLACEMENTS)
     assert result["stats"]["draw_calls"] > 0 and result["stats"]["triangles"] > 0
     assert result["stats"]["first_frame_ms"] > 0 and "SwiftShader" in result["webgl"]
+    # a software rasterizer draws the page without multisampling (static/renderer.js)
+    assert result["stats"]["renderer"] == result["webgl"] and result["stats"]["antialias"] is False
     look = not_blank(shot)
     assert look["std"] > 20 and look["colours"] > 20, look
 
@@ -460,6 +462,8 @@ def test_tiles_on_the_globe_land_at_the_site(mini, tmp_path_factory):
     assert result["ready"], result
     assert result["page_errors"] == [] and result["stats"]["errors"] == []
     stats = result["stats"]
+    # a software rasterizer draws the globe without fog (static/renderer.js)
+    assert stats["renderer"] == result["webgl"] and "SwiftShader" in stats["renderer"] and stats["fog"] is False
     record = json.loads((out / "scene" / "placements.json").read_text())
     o = record["origin"]
     from pipeline.georef import Georeferencer

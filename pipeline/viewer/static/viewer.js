@@ -10,6 +10,7 @@
 import * as THREE from "three";
 import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { webglRenderer } from "./renderer.js";
 
 const stats = window.twinViewerStats;
 const $ = (id) => document.getElementById(id);
@@ -193,7 +194,8 @@ class Viewer {
 
   setupRenderer() {
     const el = $("view");
-    this.renderer = new THREE.WebGLRenderer({antialias: true});
+    this.gpu = webglRenderer();
+    this.renderer = new THREE.WebGLRenderer({antialias: !this.gpu.software});
     this.renderer.setPixelRatio(window.devicePixelRatio || 1);
     this.renderer.setSize(el.clientWidth, el.clientHeight);
     el.appendChild(this.renderer.domElement);
@@ -781,7 +783,8 @@ async function main() {
   const info = app.renderer.info.render;
   Object.assign(stats, {first_frame_ms: performance.now(), load_ms: performance.now() - t0,
                         draw_calls: info.calls, triangles: info.triangles, lod: app.lodCounts,
-                        placements: record.placements.length, runs: [...app.runs.keys()], phases_ms: phases});
+                        placements: record.placements.length, runs: [...app.runs.keys()], phases_ms: phases,
+                        renderer: app.gpu.name, antialias: app.renderer.getContext().getContextAttributes().antialias});
   if (!info.calls || !info.triangles) stats.errors.push("the first frame drew nothing");
   window.twinViewerReady = stats.errors.length === 0;
   window.twinViewerFailed = !window.twinViewerReady;
