@@ -198,7 +198,10 @@ class CyclesScene:
         if scene_only is not doc:
             glb = self.tmp / glb.name
             glb_file.write(glb, scene_only, binary)
-        bpy.ops.import_scene.gltf(filepath=str(glb))
+        # Selecting what it made deselects every object of the scene first, through an
+        # operator and its view-layer updates: a cost that grows with the scene, for a
+        # selection nothing here reads.
+        bpy.ops.import_scene.gltf(filepath=str(glb), import_select_created_objects=False)
         new = [o for o in self.scene.collection.objects if o not in before]  # in the order linked
         if collection != self.scene.collection:
             for o in new:
