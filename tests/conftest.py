@@ -109,9 +109,11 @@ def pytest_collection_modifyitems(config, items):
         if names:
             item.add_marker(pytest.mark.xdist_group(group[item.module.__name__, names[0]]))
     result = yield  # test_grouping checks that xdist took the marks
-    # The costly first, the quick ones last to fill the gaps: the tests that share a
-    # module fixture while the sample builds in the background, then what needs the
-    # sample.
+    # The costly first, the quick ones last to fill the gaps: a long test (its mark)
+    # and the tests that share a module fixture while the sample builds in the
+    # background, then what needs the sample. A long test that waits on clocks among
+    # the quick ones last would wait beside other tests' waits (the dask cluster's),
+    # leaving both cores idle; first, the sample's build and the fixtures fill them.
     items.sort(key=_cost_rank)
     return result
 
@@ -149,6 +151,8 @@ def _fixture_groups(shared: dict) -> dict[tuple[str, str], str]:
 
 
 def _cost_rank(item) -> int:
+    if item.get_closest_marker("long"):
+        return -1
     if "sample_build" in getattr(item, "fixturenames", ()):
         return 1
     return 0 if item.get_closest_marker("xdist_group") else 2

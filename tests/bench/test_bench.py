@@ -102,6 +102,7 @@ def test_clean_makes_json_safe():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_quick_bench_on_mini_sources(tmp_path):
     from pipeline.bench import run_bench
 
