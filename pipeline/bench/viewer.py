@@ -49,13 +49,13 @@ def _count(node: dict, depth: int = 0) -> tuple[int, int]:
 def _page(built: Path, page: str, repeats: int, size) -> dict:
     from ..viewer import check
 
-    runs = []
+    runs, webgl = [], None
     for _ in range(repeats):
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
         r = check.run(built, page, size=size)
         if not r.get("ready"):
             raise RuntimeError(f"{page} was not ready: {(r.get('stats') or {}).get('errors') or r.get('error')}")
-        s = r["stats"]
+        s, webgl = r["stats"], r.get("webgl")
         runs.append({"first_frame_s": s["first_frame_ms"] / 1000.0, "ready_s": r["ready_ms"] / 1000.0,
                      "pss_mb": r["memory"]["pss_bytes"] / 2**20, "js_heap_mb": r["memory"]["js_heap_used_bytes"] / 2**20,
                      "phases_ms": s.get("phases_ms"), "load_average": load,
@@ -63,7 +63,7 @@ def _page(built: Path, page: str, repeats: int, size) -> dict:
                                           "antialias", "fog") if k in s}})
     return {"runs": runs, "first_frame_s": statistics.median(r["first_frame_s"] for r in runs),
             "pss_mb": statistics.median(r["pss_mb"] for r in runs), "size_px": list(size),
-            "webgl": r.get("webgl") or "SwiftShader"}
+            "webgl": webgl}
 
 
 def _writers(ctx: Context, built: Path) -> dict:

@@ -62,8 +62,8 @@ async function main() {
     contextOptions: {webgl: {preserveDrawingBuffer: true}}, msaaSamples: 1,
   });
   viewer.scene.globe.depthTestAgainstTerrain = false;
-  const gpu = webglRenderer();
-  viewer.scene.fog.enabled = !gpu.software;
+  const webgl = webglRenderer();
+  viewer.scene.fog.enabled = !webgl.software;
   if (twin.built_sun) {  // the built scene's sun: its local time on the site's date
     viewer.clock.currentTime = Cesium.JulianDate.fromIso8601(twin.built_sun.time_utc);
     viewer.clock.shouldAnimate = false;
@@ -91,7 +91,7 @@ async function main() {
     Cesium.Matrix4.multiplyByPoint(transform, new Cesium.Cartesian3(p.enu[0], p.enu[1], p.enu[2]), new Cesium.Cartesian3()))]);
   const s = tileset.statistics;
   Object.assign(stats, {
-    load_ms: drawn - t0, first_frame_ms: drawn, phases_ms: phases, renderer: gpu.name, fog: viewer.scene.fog.enabled,
+    load_ms: drawn - t0, first_frame_ms: drawn, phases_ms: phases, renderer: webgl.name, fog: viewer.scene.fog.enabled,
     centre: cartographic(sphere.center), radius_m: sphere.radius,
     placements: placed, picked: await pickedPoints(viewer, 40),
     tiles_loaded: s.numberOfLoadedTilesTotal, tiles_with_content: s.numberOfTilesWithContentReady,

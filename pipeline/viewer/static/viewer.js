@@ -194,8 +194,8 @@ class Viewer {
 
   setupRenderer() {
     const el = $("view");
-    this.gpu = webglRenderer();
-    this.renderer = new THREE.WebGLRenderer({antialias: !this.gpu.software});
+    this.webgl = webglRenderer();
+    this.renderer = new THREE.WebGLRenderer({antialias: !this.webgl.software});
     this.renderer.setPixelRatio(window.devicePixelRatio || 1);
     this.renderer.setSize(el.clientWidth, el.clientHeight);
     el.appendChild(this.renderer.domElement);
@@ -784,7 +784,7 @@ async function main() {
   Object.assign(stats, {first_frame_ms: performance.now(), load_ms: performance.now() - t0,
                         draw_calls: info.calls, triangles: info.triangles, lod: app.lodCounts,
                         placements: record.placements.length, runs: [...app.runs.keys()], phases_ms: phases,
-                        renderer: app.gpu.name, antialias: app.renderer.getContext().getContextAttributes().antialias});
+                        renderer: app.webgl.name, antialias: app.renderer.getContext().getContextAttributes().antialias});
   if (!info.calls || !info.triangles) stats.errors.push("the first frame drew nothing");
   window.twinViewerReady = stats.errors.length === 0;
   window.twinViewerFailed = !window.twinViewerReady;
