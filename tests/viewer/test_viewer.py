@@ -455,6 +455,32 @@ def test_a_page_without_its_scene_fails_and_says_why(mini, tmp_path):
     assert not result["ready"] and any("install-tools" in e for e in result["stats"]["errors"])
 
 
+def test_only_a_software_rasterizer_loses_multisampling_and_fog():
+    """The pages' probe (static/renderer.js) in node, on renderer names browsers report:
+    the browser tests see SwiftShader alone, this is the GPU side of the decision."""
+    node = shutil.which("node")
+    if node is None:
+        if os.environ.get("CI"):
+            pytest.fail(f"node missing: {check.HINT}")
+        pytest.skip("node missing")
+    names = {
+        "ANGLE (Google, Vulkan 1.3.0 (SwiftShader Device (Subzero) (0x0000C0DE)), SwiftShader driver)": True,
+        "llvmpipe (LLVM 15.0.6, 256 bits)": True,
+        "Mesa softpipe": True,
+        "Google SwiftShader": True,
+        "ANGLE (NVIDIA, NVIDIA GeForce RTX 3060 (0x00002504) Direct3D11 vs_5_0 ps_5_0, D3D11)": False,
+        "Mesa Intel(R) UHD Graphics 620 (KBL GT2)": False,
+        "ANGLE (Apple, ANGLE Metal Renderer: Apple M2, Unspecified Version)": False,
+        "AMD Radeon RX 6800 XT (radeonsi, navi21, LLVM 15.0.6, DRM 3.49, 6.1.0)": False,
+    }
+    module = (Path(check.__file__).parent / "static" / "renderer.js").as_uri()
+    script = (f"import {{isSoftwareRenderer}} from {json.dumps(module)};"
+              f"console.log(JSON.stringify({json.dumps(list(names))}.map(isSoftwareRenderer)))")
+    proc = subprocess.run([node, "--input-type=module", "-e", script], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert dict(zip(names, json.loads(proc.stdout))) == names
+
+
 def test_tiles_on_the_globe_land_at_the_site(mini, tmp_path_factory):
     sources, out = mini
     shot = tmp_path_factory.mktemp("shots") / "globe.png"

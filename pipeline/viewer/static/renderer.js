@@ -7,6 +7,12 @@
 
 const SOFTWARE = /SwiftShader|llvmpipe|softpipe|Software Rasterizer/i;
 
+// Whether a WebGL renderer's name (as WEBGL_debug_renderer_info reports it) is a
+// software rasterizer.
+export function isSoftwareRenderer(name) {
+  return name != null && SOFTWARE.test(name);
+}
+
 // {name, software}: the WebGL renderer's name as the browser reports it (null without
 // WebGL) and whether it is a software rasterizer.
 export function webglRenderer() {
@@ -17,5 +23,5 @@ export function webglRenderer() {
   const name = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
   const lose = gl.getExtension("WEBGL_lose_context");
   if (lose) lose.loseContext();  // the probe's context is not kept alive beside the page's
-  return {name, software: SOFTWARE.test(name)};
+  return {name, software: isSoftwareRenderer(name)};
 }
