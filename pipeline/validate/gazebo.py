@@ -120,7 +120,7 @@ def _indices(text: str) -> np.ndarray:
     int64 (which then fails as out of range); and it reads whitespace alone as one 0."""
     if not _INDICES.fullmatch(text):
         raise ValueError("a <p> holds something other than vertex indices")
-    if not text or text.isspace():
+    if not text.strip():
         return np.zeros(0, dtype=np.int64)
     return np.fromstring(text, dtype=np.int64, sep=" ")
 
