@@ -114,6 +114,8 @@ def pytest_collection_modifyitems(config, items):
     # background, then what needs the sample. A long test that waits on clocks among
     # the quick ones last would wait beside other tests' waits (the dask cluster's),
     # leaving both cores idle; first, the sample's build and the fixtures fill them.
+    # A test that drives a browser page (5-8 s) last would leave the other worker
+    # idle while it draws: such tests come before the quick ones.
     items.sort(key=_cost_rank)
     return result
 
@@ -155,4 +157,6 @@ def _cost_rank(item) -> int:
         return -1
     if "sample_build" in getattr(item, "fixturenames", ()):
         return 1
-    return 0 if item.get_closest_marker("xdist_group") else 2
+    if item.get_closest_marker("xdist_group"):
+        return 0
+    return 2 if item.get_closest_marker("browser") else 3

@@ -459,6 +459,7 @@ def test_twin_run_records_mcap(scene, tmp_path):
 # --- the live page in Chromium ----------------------------------------------------------------
 
 
+@pytest.mark.browser
 def test_the_live_page_moves_the_pointer_within_a_second_of_a_set(scene):
     """A `set` of an oil level on the ZeroMQ socket shows as the pointer's new angle in
     the page (Chromium, headless) within 1 s; the angle is the binding's mapping."""

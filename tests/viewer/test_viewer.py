@@ -439,6 +439,7 @@ def test_viewer_state_mapping_is_the_runtimes(viewer_page):
         assert got["weights"] == pytest.approx(state.shape_weights, abs=1e-15)
 
 
+@pytest.mark.browser
 def test_a_page_without_its_scene_fails_and_says_why(mini, tmp_path):
     _, out = mini
     broken = tmp_path / "build"
@@ -481,6 +482,7 @@ def test_only_a_software_rasterizer_loses_multisampling_and_fog():
     assert dict(zip(names, json.loads(proc.stdout))) == names
 
 
+@pytest.mark.browser
 def test_tiles_on_the_globe_land_at_the_site(mini, tmp_path_factory):
     sources, out = mini
     shot = tmp_path_factory.mktemp("shots") / "globe.png"
@@ -559,6 +561,7 @@ SAMPLE_SCRIPT = """(async () => {
 })()"""
 
 
+@pytest.mark.browser
 @pytest.mark.slow
 def test_sample_in_the_viewer_plays_the_run_as_the_runtime_maps_it(sample):
     from pipeline.runtime import graph, nodes, run
@@ -587,6 +590,7 @@ def test_sample_in_the_viewer_plays_the_run_as_the_runtime_maps_it(sample):
     assert not_blank(shot)["std"] > 20
 
 
+@pytest.mark.browser
 @pytest.mark.slow
 def test_sample_tiles_land_at_the_site_on_the_globe(sample):
     shot = Path(os.environ.get("TWIN_VIEWER_SHOTS", sample)) / "globe_sample.png"
