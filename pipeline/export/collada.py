@@ -1,7 +1,9 @@
-"""COLLADA 1.4.1 writer: one .dae per visual per LOD and one per collision mesh.
+"""COLLADA 1.4.1 writer: each visual at every level an SDF model of the package draws
+it on its own, the merged visuals of the coarse variants, each collision mesh, and the
+whole model the Gazebo world's grouped placements draw.
 
-The SDF package references these files; each holds one mesh in its own (visual or
-collision) frame, because the SDF <visual><pose> places it. Metres, Z up.
+Each holds one mesh in its own (visual or collision) frame, because the SDF
+<visual><pose> places it. Metres, Z up.
 """
 
 from __future__ import annotations
@@ -41,11 +43,12 @@ _UV_SET = "UVSET0"
 
 
 def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
-    """Write every visual LOD, the merged visuals of each coarse LOD variant
-    (export/variants.py) and every collision mesh of `asset` under folder/meshes/.
+    """Write the visuals' levels the package's models draw (`drawn_visual_files`), the
+    merged visuals of each coarse LOD variant (export/variants.py) and every collision
+    mesh of `asset` under folder/meshes/.
 
-    A visual writes as many LODs as it has (names.mesh_file(link, visual, k) for
-    k < len(visual.lods)); readers fall back to its coarsest one, as Visual.lod does.
+    A visual's level that every coarse variant merges with others of its material is
+    not written: no SDF would name it.
     Returns the package-relative paths written, sorted. A level that repeats a finer
     one's mesh (a part kept at a coarser level, a frozen visual: a large share of a
     site's LOD files) gets the finer level's bytes, not a second formatting.
@@ -56,13 +59,15 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     folder = Path(folder)
     (folder / "meshes").mkdir(parents=True, exist_ok=True)
     written = []
+    drawn = drawn_visual_files(asset)
     for link, visual in asset.visuals():
         material = _material(asset, visual)
         made: dict[str, bytes] = {}  # document key -> the visual's document
         for level, mesh in enumerate(visual.lods):
             rel = names.mesh_file(link.name, visual.name, level)
-            _write_document(folder / rel, visual.name, mesh, material, made, memo)
-            written.append(rel)
+            if rel in drawn:
+                _write_document(folder / rel, visual.name, mesh, material, made, memo)
+                written.append(rel)
     for level in range(1, asset.lod_count):
         for link in asset.links:
             for visual in variant_visuals(asset, link, level):
@@ -81,6 +86,13 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
             written.append(col.mesh_file)
     written += _write_whole(asset, folder, memo)
     return sorted(written)
+
+
+def drawn_visual_files(asset: ir.Asset) -> set[str]:
+    """The visuals' own files (names.mesh_file) an SDF model of the package names:
+    every visual at LOD 0, and at each coarser LOD those its variant draws apart."""
+    return {v.mesh_file for level in range(max(1, asset.lod_count)) for link in asset.links
+            for v in variant_visuals(asset, link, level) if not v.merged}
 
 
 def _write_whole(asset: ir.Asset, folder: Path, memo) -> list[str]:

@@ -49,11 +49,15 @@ def write(
     lod: which LOD's meshes the visuals reference (a visual with fewer LODs uses its
          coarsest). model_name: the <model name> and config name (default asset.id).
     visual_overrides: visual name -> (pose (4, 4) in the link frame or None,
-         material name or None), used by the runtime for per-state model variants.
+         material name or None), used by the runtime for per-state model variants;
+         the package's own model (lod 0) only: a coarse variant draws a visual apart
+         only where the package has its file (collada.write).
     """
     folder = Path(folder)
     overrides = dict(visual_overrides or {})
     _check_overrides(asset, overrides)
+    if overrides and lod > 0:
+        raise ValueError(f"asset {asset.id!r}: visual_overrides apply to LOD 0 only, not to LOD {lod}")
     name = model_name or asset.id
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "model.config").write_bytes(_serialize(_config(asset, name)))

@@ -346,8 +346,9 @@ def check_build(models: Path, world: Path | None, packages: dict[str, tuple[Path
     found: dict[str, list[Finding]] = {a: [] for a in packages}
     for asset, rows in _model_findings(report, manifests).items():
         found[asset].extend(rows)
-    # the packages' world loaded the meshes its models use; the rest (levels no
-    # variant draws any more) are loaded on their own
+    # the packages' world loaded the meshes its models use; the rest (the whole-model
+    # files the scene's world draws, collision meshes a primitive stands in for) are
+    # loaded on their own
     reports = {str(Path(k).resolve()): v for k, v in report.get("meshes", {}).items()}
     unread = [p for p in meshes if str(p) not in reports]
     reports.update({str(Path(k).resolve()): v for k, v in probe_meshes(unread).items()})

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from fixtures_assets import articulated_asset, box_mesh, rpy_matrix
+from fixtures_assets import articulated_asset, box_mesh, rpy_matrix, tetra_mesh
 from pipeline import ir
 from pipeline.errors import UserError
 from pipeline.export import collada as collada_writer
@@ -93,6 +93,32 @@ def test_every_dae_passes_the_collada_schema(built):
     for rel in daes:
         result = external.collada_schema(parent / ASSET_ID / rel)
         assert result.status == "passed", (rel, result.messages)
+
+
+def test_a_level_its_variant_merges_is_not_written_and_every_file_is_named(tmp_path):
+    """Two steel visuals of one link merge in the LOD 1 variant: their own LOD 1 files
+    would be named by no SDF, so the package holds the merged file instead, and the
+    visual files it holds are exactly those its models name (the world's whole-model
+    files aside). A coarse variant cannot draw a visual apart by an override."""
+    from dataclasses import replace
+
+    asset = articulated_asset()
+    base = asset.links[0]
+    plate = ir.Visual("plate", "steel", (box_mesh((0.4, 0.4, 0.05), (0, 0, 0.55)), tetra_mesh(0.4, (0, 0, 0.55))))
+    asset = asset.with_(links=(replace(base, visuals=(*base.visuals, plate)), *asset.links[1:]))
+    parent = tmp_path / "models"
+    files = _write_package(parent, asset)
+    for visual in ("body", "plate"):
+        assert names.mesh_file("base", visual, 0) in files and names.mesh_file("base", visual, 1) not in files
+    assert names.merged_mesh_file("base", "steel", 1) in files
+    named = {u[len(f"model://{ASSET_ID}/"):] for folder in (ASSET_ID, names.lod_model_name(ASSET_ID, 1))
+             for u in _uris(_parse(parent / folder / "model.sdf")) if u.endswith(".dae")}
+    visual_files = {f for f in files if f.endswith(".dae") and not f.startswith("meshes/whole__")
+                    and not f.endswith("__collision.dae")}
+    assert visual_files == {f for f in named if not f.endswith("__collision.dae")}
+    assert names.mesh_file("arm", "arm_shell", 1) in named  # alone with its material: drawn apart, written
+    with pytest.raises(ValueError, match="LOD 0 only"):
+        sdf_writer.write(asset, tmp_path / "x", lod=1, visual_overrides={"plate": (None, "lamp_glass")})
 
 
 @pytest.mark.filterwarnings("ignore::PendingDeprecationWarning")  # pycollada's np.matrix
