@@ -32,7 +32,7 @@ tools: $(TOOLS)
 # pipeline/'s bytecode, compiled ahead: an editable install leaves the package without
 # it, and where PYTHONDONTWRITEBYTECODE is set (it is on this machine) every process
 # compiles each module it imports again: the CLI, every build worker, every Blender
-# process (a test run starts some eight hundred). compileall writes only what is missing
+# process (a test run starts hundreds). compileall writes only what is missing
 # or stale; Python still checks each file's timestamp, so an edit is compiled anew.
 BYTECODE = $(BIN)/python -m compileall -q -j 0 pipeline > /dev/null
 

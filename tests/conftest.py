@@ -114,8 +114,8 @@ def pytest_collection_modifyitems(config, items):
     # background, then what needs the sample. A long test that waits on clocks among
     # the quick ones last would wait beside other tests' waits (the dask cluster's),
     # leaving both cores idle; first, the sample's build and the fixtures fill them.
-    # A test that drives a browser page (5-8 s) last would leave the other worker
-    # idle while it draws: such tests come before the quick ones.
+    # A test that drives a browser page (seconds a page) last would leave the other
+    # worker idle while it draws: such tests come before the quick ones.
     items.sort(key=_cost_rank)
     return result
 

@@ -43,7 +43,7 @@ _UV_SET = "UVSET0"
 
 
 def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
-    """Write the visuals' levels the package's models draw (`drawn_visual_files`), the
+    """Write the visuals' levels the package's models draw (`_drawn_visual_files`), the
     merged visuals of each coarse LOD variant (export/variants.py) and every collision
     mesh of `asset` under folder/meshes/.
 
@@ -59,7 +59,7 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     folder = Path(folder)
     (folder / "meshes").mkdir(parents=True, exist_ok=True)
     written = []
-    drawn = drawn_visual_files(asset)
+    drawn = _drawn_visual_files(asset)
     for link, visual in asset.visuals():
         material = _material(asset, visual)
         made: dict[str, bytes] = {}  # document key -> the visual's document
@@ -88,7 +88,7 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     return sorted(written)
 
 
-def drawn_visual_files(asset: ir.Asset) -> set[str]:
+def _drawn_visual_files(asset: ir.Asset) -> set[str]:
     """The visuals' own files (names.mesh_file) an SDF model of the package names:
     every visual at LOD 0, and at each coarser LOD those its variant draws apart."""
     return {v.mesh_file for level in range(max(1, asset.lod_count)) for link in asset.links

@@ -4,6 +4,7 @@ validators (libsdformat, pycollada's schema) and by lxml with SDF 1.9 frame sema
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import collada
 import numpy as np
@@ -100,8 +101,6 @@ def test_a_level_its_variant_merges_is_not_written_and_every_file_is_named(tmp_p
     would be named by no SDF, so the package holds the merged file instead, and the
     visual files it holds are exactly those its models name (the world's whole-model
     files aside). A coarse variant cannot draw a visual apart by an override."""
-    from dataclasses import replace
-
     asset = articulated_asset()
     base = asset.links[0]
     plate = ir.Visual("plate", "steel", (box_mesh((0.4, 0.4, 0.05), (0, 0, 0.55)), tetra_mesh(0.4, (0, 0, 0.55))))
@@ -314,8 +313,6 @@ def test_fmt_join_spells_every_float_as_fmt_does():
 def test_a_level_that_repeats_a_finer_mesh_is_formatted_once(tmp_path, monkeypatch):
     """A visual whose LOD2 has LOD1's content (another Mesh object, as read back from
     an .ir file) gets LOD1's bytes; a different mesh its own document."""
-    from dataclasses import replace
-
     asset = articulated_asset()
     link = asset.links[0]
     visual = link.visuals[0]
