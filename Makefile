@@ -57,10 +57,13 @@ TEST_WORKERS ?= auto
 TEST_TMPDIR ?= $(shell avail=$$(df -Pk /dev/shm 2>/dev/null | awk 'NR == 2 {print $$4}'); \
 	[ -w /dev/shm ] && [ "$${avail:-0}" -ge 6291456 ] && echo /dev/shm/substation-twin-tests-$$(id -u))
 
+# PYTHONDONTWRITEBYTECODE emptied: pytest keeps the test modules as it rewrote their
+# asserts (tests/__pycache__) only where Python may write bytecode, and each worker
+# rewrites every module again otherwise, at every run.
 test: $(STAMP) $(TOOLS)
 	$(BYTECODE)
 	tmp='$(TEST_TMPDIR)'; if [ -n "$$tmp" ]; then mkdir -p "$$tmp" && export TMPDIR="$$tmp"; fi; \
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --durations=20
+	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --durations=20
 
 bench: $(STAMP) $(TOOLS)
 	$(BYTECODE)

@@ -6,6 +6,7 @@ bad name or a terminal that is not an Empty an error naming the object."""
 
 from __future__ import annotations
 
+import importlib.util
 import subprocess
 import sys
 import textwrap
@@ -19,8 +20,7 @@ from pipeline.config import load_asset_config
 from pipeline.errors import UserError
 from pipeline.ingest.blend import read_blend_path
 
-bpy_missing = subprocess.run([sys.executable, "-c", "import bpy"], capture_output=True).returncode != 0
-pytestmark = [pytest.mark.blender, pytest.mark.skipif(bpy_missing, reason="needs bpy")]
+pytestmark = [pytest.mark.blender, pytest.mark.skipif(importlib.util.find_spec("bpy") is None, reason="needs bpy")]
 
 AUTHOR = textwrap.dedent('''
     import sys
