@@ -61,10 +61,9 @@ def _insert(msp, tag: str):
     return next(e for e in msp.query("INSERT") if any(a.dxf.text == tag for a in e.attribs))
 
 
-def test_the_terrain_reruns_only_when_what_it_is_made_of_changes(tmp_path):
-    sources = mini_sources.make(tmp_path / "sources")
-    plan, out = sources / "floorplan" / "plan.dxf", tmp_path / "build"
-    explain(sources, out)
+def test_the_terrain_reruns_only_when_what_it_is_made_of_changes(mini_copy, tmp_path):
+    sources, out = mini_copy  # the run's mini build, copied
+    plan = sources / "floorplan" / "plan.dxf"
     terrain = {p: h for p, h in tree_hashes(out).items() if p.startswith("models/mini_terrain/")}
     assert terrain
 
@@ -96,16 +95,15 @@ def test_the_terrain_reruns_only_when_what_it_is_made_of_changes(tmp_path):
     assert tree_hashes(out) == tree_hashes(tmp_path / "clean")
 
 
-def test_the_gazebo_worlds_moving_parts_rerun_the_scene_side_only(tmp_path):
+def test_the_gazebo_worlds_moving_parts_rerun_the_scene_side_only(mini_copy):
     """site.toml [gazebo] moving_parts is read by the scene alone (and by what reads
     site.toml after it: the viewer and the tiles); no asset, view or terrain reruns,
     placements.json records the choice for the live twin, and a bad value or a pattern
     that selects no switch stops the build with one line naming the file and the key."""
     from helpers import twin
 
-    sources = mini_sources.make(tmp_path / "sources")
-    out, site = tmp_path / "build", sources / "site.toml"
-    explain(sources, out)
+    sources, out = mini_copy  # the run's mini build, copied
+    site = sources / "site.toml"
     record = json.loads((out / "scene" / "placements.json").read_text())
     # "auto": the world with every switch moving, well within sdformat's parse budget
     assert record["gazebo"]["moving_parts"] == "all" and record["gazebo"]["chosen_by"] == "auto"
