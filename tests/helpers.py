@@ -13,6 +13,7 @@ import traceback
 from pathlib import Path
 from typing import Callable
 
+import pytest
 from filelock import FileLock
 
 ROOT = Path(__file__).resolve().parent.parent  # the checkout
@@ -23,6 +24,13 @@ DATA = TESTS / "data"  # small hand-made fixtures: bad/ and clean/
 # them one folder further up)
 CORPUS = next((p / "shared" / "corpus" for p in (ROOT.parent, ROOT.parent.parent) if (p / "shared" / "corpus").is_dir()),
               ROOT.parent / "shared" / "corpus")
+
+
+def unavailable(message: str) -> None:
+    """A tool the test needs is not here: skipped, failed in CI (which installs them all)."""
+    if os.environ.get("CI"):
+        pytest.fail(message)
+    pytest.skip(message)
 
 
 def twin(*args, cwd: Path | None = ROOT, timeout: float = 1800, env: dict | None = None) -> subprocess.CompletedProcess:

@@ -43,7 +43,7 @@ _UV_SET = "UVSET0"
 
 
 def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
-    """Write the visuals' levels the package's models draw (`_drawn_visual_files`), the
+    """Write the visuals' levels the package's models draw (`_variants`), the
     merged visuals of each coarse LOD variant (export/variants.py) and every collision
     mesh of `asset` under folder/meshes/.
 
@@ -59,7 +59,8 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     folder = Path(folder)
     (folder / "meshes").mkdir(parents=True, exist_ok=True)
     written = []
-    drawn = _drawn_visual_files(asset)
+    variants = _variants(asset)
+    drawn = {v.mesh_file for _, v in variants if not v.merged}
     for link, visual in asset.visuals():
         material = _material(asset, visual)
         made: dict[str, bytes] = {}  # document key -> the visual's document
@@ -68,13 +69,11 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
             if rel in drawn:
                 _write_document(folder / rel, visual.name, mesh, material, made, memo)
                 written.append(rel)
-    for level in range(1, asset.lod_count):
-        for link in asset.links:
-            for visual in variant_visuals(asset, link, level):
-                if visual.merged:
-                    _write_document(folder / visual.mesh_file, visual.name, visual.mesh(level),
-                                    _material(asset, visual.parts[0]), {}, memo)
-                    written.append(visual.mesh_file)
+    for level, visual in variants:
+        if visual.merged and level > 0:
+            _write_document(folder / visual.mesh_file, visual.name, visual.mesh(level),
+                            _material(asset, visual.parts[0]), {}, memo)
+            written.append(visual.mesh_file)
     for link in asset.links:
         for col in link.collisions:
             rel = names.collision_file(link.name, col.name)
@@ -88,11 +87,12 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     return sorted(written)
 
 
-def _drawn_visual_files(asset: ir.Asset) -> set[str]:
-    """The visuals' own files (names.mesh_file) an SDF model of the package names:
-    every visual at LOD 0, and at each coarser LOD those its variant draws apart."""
-    return {v.mesh_file for level in range(max(1, asset.lod_count)) for link in asset.links
-            for v in variant_visuals(asset, link, level) if not v.merged}
+def _variants(asset: ir.Asset) -> list[tuple[int, object]]:
+    """(level, variant visual) of every link at every LOD, as the package's SDF models
+    draw them (export/variants.py): a visual not merged at a level has its own file
+    there; the merged ones at a coarse LOD have theirs."""
+    return [(level, v) for level in range(max(1, asset.lod_count)) for link in asset.links
+            for v in variant_visuals(asset, link, level)]
 
 
 def _write_whole(asset: ir.Asset, folder: Path, memo) -> list[str]:

@@ -27,7 +27,7 @@ from pipeline import glb
 from pipeline.geometry.transform import matrix_from_quaternion
 from pipeline.viewer import check, libs, sun_table, tiles
 
-from helpers import SOURCES, tree_hashes, twin
+from helpers import SOURCES, tree_hashes, twin, unavailable
 
 
 @pytest.fixture(scope="session")
@@ -306,15 +306,8 @@ def check_page(build: Path, page: str, shot: Path, script: str | None = None, si
     SwiftShader draws every pixel on the CPU: a small page is as good a check, and quicker."""
     lacking = check.missing()
     if lacking:
-        _unavailable(f"missing {', '.join(lacking)}: {check.HINT}")
+        unavailable(f"missing {', '.join(lacking)}: {check.HINT}")
     return check.run(build, page, screenshot=shot, size=size, script=script)
-
-
-def _unavailable(message: str) -> None:
-    """A tool the test needs is not here: skipped, failed in CI."""
-    if os.environ.get("CI"):
-        pytest.fail(message)
-    pytest.skip(message)
 
 
 def not_blank(png: Path) -> dict:
@@ -465,7 +458,7 @@ def test_only_a_software_rasterizer_loses_multisampling_and_fog():
     the browser tests see SwiftShader alone, this is the GPU side of the decision."""
     node = shutil.which("node")
     if node is None:
-        _unavailable(f"node missing: {check.HINT}")
+        unavailable(f"node missing: {check.HINT}")
     names = {
         "ANGLE (Google, Vulkan 1.3.0 (SwiftShader Device (Subzero) (0x0000C0DE)), SwiftShader driver)": True,
         "llvmpipe (LLVM 15.0.6, 256 bits)": True,
