@@ -7,7 +7,8 @@
 - Tasks run on an executor (engine.executors; by default a pool of spawned
   workers that serve many tasks each); the scheduler tells it how many tasks run at
   once and each one's share of the cores (`_worker_setup`), and a local pool when a
-  task has waited long enough for a worker to start another (GROW_AFTER_S).
+  task has waited long enough for a worker to start another (GROW_AFTER_S) while a
+  core of the machine stood idle (GROW_IDLE_CORES).
 - The build folder is locked (fcntl) for the whole build: a second build waits.
 - Every output reaches build/ through the cache by temp-and-rename, and the state
   file is rewritten atomically after each task, so a killed build resumes cleanly.
@@ -43,7 +44,22 @@ STATE_FILE = ".state.json"
 # workers on demand): less than a spawned worker takes to start and import a task's
 # libraries, more than the short tasks of an edit's chain take to run.
 GROW_AFTER_S = 0.25
+# ... and only if this many of the machine's cores stood idle, on average, over that
+# wait: on a machine whose cores are all busy (other builds, a test suite's other workers) a new
+# worker's start-up takes its core from the tasks already running and runs nothing sooner.
+GROW_IDLE_CORES = 0.5
 LOCK_FILE = ".lock"
+
+
+def idle_core_seconds() -> float | None:
+    """CPU-seconds the machine's cores have stood idle (or waiting on I/O) since boot,
+    from /proc/stat; None where there is no such file."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return (int(fields[4]) + int(fields[5])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 @dataclass
@@ -373,14 +389,18 @@ class Scheduler:
     def _first_finished(self, b: _Build) -> set[Future]:
         """Wait for a task in flight to finish. While a task waits in the pool for a
         worker (more in flight than workers started), a pool that starts workers on
-        demand (`grow`) gets one more each GROW_AFTER_S."""
+        demand (`grow`) gets one more each GROW_AFTER_S in which the machine had an
+        idle core (a machine that cannot say grows it all the same)."""
         grow = getattr(b.pool, "grow", None)
         while True:
             queued = grow is not None and self._in_flight(b) > len(pool_processes(b.pool))
+            idle = idle_core_seconds() if queued else None
             finished, _ = wait(list(b.running), timeout=GROW_AFTER_S if queued else None, return_when=FIRST_COMPLETED)
             if finished:
                 return finished
-            grow()
+            now = idle_core_seconds()
+            if idle is None or now is None or now - idle >= GROW_IDLE_CORES * GROW_AFTER_S:
+                grow()
 
     def _in_flight(self, b: _Build) -> int:
         """Tasks and warm-ups sent to the pool and not yet finished."""

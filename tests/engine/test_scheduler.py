@@ -482,18 +482,20 @@ def _fan_out(delay: float) -> list:
     return [task("first"), task("second", ("first",)), task("third", ("first",))]
 
 
-def test_a_second_worker_starts_only_for_a_task_that_waited_for_one(tmp_path):
-    """An edit's package is followed by its placement and the viewer at once: short
-    tasks that become ready together run in the worker already started. Tasks that
-    keep a worker busy past GROW_AFTER_S get a second one, side by side."""
+def _machine(monkeypatch, idle_cores: float) -> None:
+    """The scheduler sees a machine whose cores stand `idle_cores` idle on average."""
+    from pipeline.engine import scheduler
+
+    monkeypatch.setattr(scheduler, "idle_core_seconds", lambda: idle_cores * time.monotonic())
+
+
+def _counted(started: list):
+    """The local pool, with how many workers it started appended to `started` when it
+    shuts down."""
     from pipeline.engine.executors import local_pool
-    from pipeline.engine.scheduler import GROW_AFTER_S, Scheduler
     from pipeline.engine.worker import pool_processes
 
-    started = []
-
     def counted(workers):
-        """The local pool, with how many workers it started recorded when it shuts down."""
         pool = local_pool(workers)
         shutdown = pool.shutdown
 
@@ -504,10 +506,50 @@ def test_a_second_worker_starts_only_for_a_task_that_waited_for_one(tmp_path):
         pool.shutdown = recorded
         return pool
 
+    return counted
+
+
+def test_a_second_worker_starts_only_for_a_task_that_waited_for_one(tmp_path, monkeypatch):
+    """An edit's package is followed by its placement and the viewer at once: short
+    tasks that become ready together run in the worker already started. Tasks that
+    keep a worker busy past GROW_AFTER_S get a second one, side by side, on a machine
+    with a core to spare."""
+    from pipeline.engine.scheduler import GROW_AFTER_S, Scheduler
+
+    _machine(monkeypatch, idle_cores=1.0)
+    started = []
+    counted = _counted(started)
+
     short = Scheduler(tmp_path / "short", jobs=2, executor=counted).run(_fan_out(0.0))
     assert started == [1] and len({short.results[n]["pid"] for n in ("first", "second", "third")}) == 1
     long = Scheduler(tmp_path / "long", jobs=2, executor=counted).run(_fan_out(4 * GROW_AFTER_S))
     assert started == [1, 2] and long.results["second"]["pid"] != long.results["third"]["pid"]
+
+
+def test_no_second_worker_starts_while_every_core_is_busy(tmp_path, monkeypatch):
+    """The tasks that get a second worker on a machine with a core to spare keep to the
+    one started while the machine's cores are all busy: a new worker would take its
+    start-up from the task already running."""
+    from pipeline.engine.scheduler import GROW_AFTER_S, GROW_IDLE_CORES, Scheduler
+
+    _machine(monkeypatch, idle_cores=GROW_IDLE_CORES / 2)
+    started = []
+    long = Scheduler(tmp_path / "busy", jobs=2, executor=_counted(started)).run(_fan_out(4 * GROW_AFTER_S))
+    assert started == [1] and len({long.results[n]["pid"] for n in ("first", "second", "third")}) == 1
+
+
+def test_the_machines_idle_time_is_read_from_the_kernel():
+    """/proc/stat's idle and iowait time: it never goes back, and grows by no more than
+    every core idle for the time between two readings."""
+    from pipeline.engine.scheduler import idle_core_seconds
+
+    if not Path("/proc/stat").is_file():
+        assert idle_core_seconds() is None
+        return
+    t0, a = time.monotonic(), idle_core_seconds()
+    time.sleep(0.3)
+    b, t1 = idle_core_seconds(), time.monotonic()
+    assert 0.0 < a <= b <= a + (os.cpu_count() or 1) * (t1 - t0) + 0.05
 
 
 def test_a_pool_on_demand_grows_to_its_count_and_no_further(tmp_path):
