@@ -26,7 +26,7 @@ from pipeline.digest import sha256_json
 from pipeline.errors import UserError
 from pipeline.export import names
 from pipeline.export.textures import texture_file
-from pipeline.export.variants import variant_collisions, variant_visuals
+from pipeline.export.variants import VariantVisual, variant_collisions, variant_visuals
 from pipeline.geometry.merge import merge_meshes
 from pipeline.geometry.metrics import stored_normals
 
@@ -87,7 +87,7 @@ def write(asset: ir.Asset, folder: Path, memo=None) -> list[str]:
     return sorted(written)
 
 
-def _variants(asset: ir.Asset) -> list[tuple[int, object]]:
+def _variants(asset: ir.Asset) -> list[tuple[int, VariantVisual]]:
     """(level, variant visual) of every link at every LOD, as the package's SDF models
     draw them (export/variants.py): a visual not merged at a level has its own file
     there; the merged ones at a coarse LOD have theirs."""
