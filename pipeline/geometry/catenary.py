@@ -312,7 +312,11 @@ def change_of_state(p0, p1, w: float, ea: float, alpha: float, h_ref: float, t_r
     temperature is invariant. The length stretched by tension is S = S0 (1 + alpha
     (t - t_ref)) + (integral of T ds) / EA (small strain), with S and the integral
     exact on the catenary; solved for H by a bracketed root search (S - integral/EA
-    falls monotonically with H). `ea` in N (inf: inextensible), `alpha` in 1/K."""
+    falls monotonically with H). `ea` in N (inf: inextensible), `alpha` in 1/K. At
+    the reference temperature the reference tension is the answer, exactly (a root
+    search would return it to within its tolerance, at the cost of the search)."""
+    if t == t_ref:
+        return float(h_ref)
     ref = from_tension(p0, p1, h_ref, w)
     if ref.straight:
         return h_ref  # a plumb or weightless span carries no sag to trade for tension

@@ -130,8 +130,7 @@ def solve_curve(spec: wsrc.SpanSpec, ctype: wsrc.ConductorType, p0: np.ndarray, 
     else:
         sag = spec.sag_m if spec.sag_m is not None else spec.sag_ratio * float(np.hypot(*(p1 - p0)[:2]))
         h_ref = cat.from_sag(p0, p1, sag).a * w
-    tension = h_ref if temperature_c == spec.temperature_c else cat.change_of_state(
-        p0, p1, w, ctype.ea, ctype.alpha_per_k, h_ref, spec.temperature_c, temperature_c)
+    tension = cat.change_of_state(p0, p1, w, ctype.ea, ctype.alpha_per_k, h_ref, spec.temperature_c, temperature_c)
     return cat.from_tension(p0, p1, tension, w), tension
 
 
