@@ -44,10 +44,13 @@ scene: $(STAMP) $(TOOLS)
 validate: $(STAMP)
 	$(BIN)/twin validate --sources $(SOURCES) --out $(OUT)
 
-# The suite on every core (pytest-xdist); tests that share a costly module fixture
-# run on one worker together (their xdist_group marks), the others one by one; the
-# twenty slowest are listed at the end.
-TEST_WORKERS ?= auto
+# The suite on every core (pytest-xdist) and one worker more: some tests wait more than
+# they compute (a dask cluster or a browser starting, a killed run's clock, a live
+# twin's ticks), and with a worker per core the cores stand idle whenever such tests
+# run on all of them at once. Tests that share a costly module fixture run on one
+# worker together (their xdist_group marks), the others one by one; the twenty slowest
+# are listed at the end.
+TEST_WORKERS ?= $(shell echo $$(( $$(nproc 2>/dev/null || echo 1) + 1 )))
 # The suite makes and deletes tens of thousands of files (builds, renders, copies of
 # them); on a disk filesystem the kernel's bookkeeping of them is a good part of the
 # run's CPU. Where /dev/shm (a filesystem in memory) has room for a run's files and
