@@ -201,7 +201,7 @@ class CyclesScene:
         # Selecting what it made deselects every object of the scene first, through an
         # operator and its view-layer updates: a cost that grows with the scene, for a
         # selection nothing here reads.
-        bpy.ops.import_scene.gltf(filepath=str(glb), import_select_created_objects=False)
+        _operator("import_scene.gltf", filepath=str(glb), import_select_created_objects=False)
         new = [o for o in self.scene.collection.objects if o not in before]  # in the order linked
         if collection != self.scene.collection:
             for o in new:
@@ -511,6 +511,16 @@ class CyclesScene:
 
 
 GLASS_ALPHA_MAX = 0.5  # glTF alpha at or below which a material is a window, not a tint
+
+
+def _operator(name: str, **properties) -> set[str]:
+    """Blender's operator `name` (as bpy.ops names it: "import_scene.gltf") called
+    without bpy.ops' view-layer updates before and after it. Each update evaluates
+    the whole view layer; the scene is updated once it is loaded (load_many) and
+    before each render, and nothing an import does reads evaluated data."""
+    from _bpy import ops
+
+    return ops.call(name, properties)
 
 
 def _tune_material(mat) -> bool:
