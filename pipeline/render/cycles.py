@@ -131,9 +131,8 @@ class CyclesScene:
     def load_many(self, tags) -> None:
         """`load` each tag, the view layer updated once at the end: an update costs time
         in proportion to the scene, so one per placement grows with the square of a
-        site's size. The first placement of each asset comes first, and the placements
-        are out of the view layer while they load: the glTF importer updates the view
-        layer at each of its steps, cheap when it holds little more than the import."""
+        site's size (imports make none: _operator). The first placement of each asset
+        comes first: the imports, then the copies of what they made."""
         tags = list(tags)
         assets = {self.site.placement(t)["asset"] for t in self.roots}
         first = []
@@ -143,12 +142,8 @@ class CyclesScene:
                 assets.add(asset)
                 first.append(tag)
         leading = set(first)
-        self._placements_layer().exclude = True
-        try:
-            for tag in first + [t for t in tags if t not in leading]:
-                self.load(tag, update=False)
-        finally:  # Blender keeps the placements show_only excluded as they were
-            self._placements_layer().exclude = False
+        for tag in first + [t for t in tags if t not in leading]:
+            self.load(tag, update=False)
         self.bpy.context.view_layer.update()
 
     def _placements_layer(self):
