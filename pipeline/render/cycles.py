@@ -510,9 +510,10 @@ GLASS_ALPHA_MAX = 0.5  # glTF alpha at or below which a material is a window, no
 
 def _operator(name: str, **properties) -> set[str]:
     """Blender's operator `name` (as bpy.ops names it: "import_scene.gltf") called
-    without bpy.ops' view-layer updates before and after it. Each update evaluates
-    the whole view layer; the scene is updated once it is loaded (load_many) and
-    before each render, and nothing an import does reads evaluated data."""
+    without bpy.ops' view-layer updates before and after it, through the module
+    bpy.ops wraps (_bpy.ops, an internal of bpy). Each update evaluates the whole
+    view layer; the scene is updated once it is loaded (load_many) and before each
+    render, and nothing an import does reads evaluated data."""
     from _bpy import ops
 
     return ops.call(name, properties)
