@@ -91,7 +91,7 @@ class LiveWires:
 
     def _tension(self, span: dict, temperature_c: float | None) -> float:
         t = self.types[span["type"]]
-        if temperature_c is None or temperature_c == span["temperature_c"]:
+        if temperature_c is None:
             return span["tension_n"]
         return cat.change_of_state(np.array(span["from"]["enu"]), np.array(span["to"]["enu"]), span["weight_n_per_m"],
                                    t["ea_n"] * t["bundle_count"], t["alpha_per_k"], span["tension_n"],

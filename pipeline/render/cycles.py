@@ -131,18 +131,8 @@ class CyclesScene:
     def load_many(self, tags) -> None:
         """`load` each tag, the view layer updated once at the end: an update costs time
         in proportion to the scene, so one per placement grows with the square of a
-        site's size (imports make none: _operator). The first placement of each asset
-        comes first: the imports, then the copies of what they made."""
-        tags = list(tags)
-        assets = {self.site.placement(t)["asset"] for t in self.roots}
-        first = []
+        site's size (imports make none: _operator)."""
         for tag in tags:
-            asset = self.site.placement(tag)["asset"]
-            if asset not in assets:
-                assets.add(asset)
-                first.append(tag)
-        leading = set(first)
-        for tag in first + [t for t in tags if t not in leading]:
             self.load(tag, update=False)
         self.bpy.context.view_layer.update()
 
