@@ -131,8 +131,22 @@ class CyclesScene:
     def load_many(self, tags) -> None:
         """`load` each tag, the view layer updated once at the end: an update costs time
         in proportion to the scene, so one per placement grows with the square of a
-        site's size (imports make none: _operator)."""
+        site's size (imports make none: _operator).
+
+        The first placement of each asset not loaded yet comes first: the imports, then
+        the copies of what they made. The glTF importer makes and deletes a temporary
+        object for each mesh, and Blender's deletion of an object looks through the whole
+        file's data, so an import costs in proportion to what is already loaded."""
+        tags = list(tags)
+        assets = set(self.prototypes)
+        imports = []
         for tag in tags:
+            asset = self.site.placement(tag)["asset"]
+            if asset not in assets:
+                assets.add(asset)
+                imports.append(tag)
+        first = set(imports)
+        for tag in imports + [t for t in tags if t not in first]:
             self.load(tag, update=False)
         self.bpy.context.view_layer.update()
 

@@ -101,8 +101,7 @@ def populate(bl: CyclesScene, site: BuiltSite, shots: list[Shot]) -> None:
         far = min(shot.lens.far, dist + 15.0)  # beyond the target, its own tank hides the rest
         sun = shot.sun_dir if shot.sun_elevation > 0 else None
         wanted |= {it["tag"] for it in cull(spheres, shot.cam_pose, k, shot.lens.near, far, sun)}
-    for tag in sorted(wanted):
-        bl.load(tag)
+    bl.load_many(sorted(wanted))
     bl.load_terrain()  # the ground: shadows, bounce light, what the gauge glass reflects
     centres = [site.pose(site.placement(t))[:3, 3] for t in {s.target for s in shots}]
     poles = [p["tag"] for p in site.placements if p["asset"] == "lighting_pole" and p["asset"] in site.manifests
