@@ -16,7 +16,9 @@ from pipeline.engine.scheduler import Scheduler
 from pipeline.fork_join import SHARE_VARIABLE
 
 
-def upper(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:
+def upper(staging: Path, src: str, name: str, delay: float = 0.0, meet: str | None = None) -> dict:
+    """`meet`: a folder where each upper leaves its name and waits for the other's: the
+    two run side by side, each in a worker of its own."""
     out = staging / "up" / f"{name}.txt"
     out.parent.mkdir(parents=True, exist_ok=True)
     text = Path(src).read_text().upper()
@@ -26,7 +28,19 @@ def upper(staging: Path, src: str, name: str, delay: float = 0.0) -> dict:
             f.flush()
             if delay:
                 time.sleep(delay)
+    if meet is not None:
+        _meet(Path(meet), name, ("a", "b"))
     return {"chars": len(text), "cores": os.environ.get(SHARE_VARIABLE), "cpus": _cpus()}
+
+
+def _meet(folder: Path, name: str, everyone: tuple[str, ...], timeout_s: float = 300.0) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / name).touch()
+    deadline = time.monotonic() + timeout_s
+    while not all((folder / n).exists() for n in everyone):
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"{name} waited {timeout_s} s for {everyone} in {folder}")
+        time.sleep(0.01)
 
 
 def join(staging: Path, build: str, sep: str) -> dict:
@@ -94,9 +108,10 @@ def _cpus() -> list[int] | None:
     return sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
 
 
-def tasks(src: Path, build: Path, sep: str = "+", delay: float = 0.0) -> list[Task]:
+def tasks(src: Path, build: Path, sep: str = "+", delay: float = 0.0, meet: Path | None = None) -> list[Task]:
     ups = [Task(name=f"upper:{n}", stage="assets", action=upper,
-                args={"src": str(src / f"{n}.txt"), "name": n, "delay": delay},
+                args={"src": str(src / f"{n}.txt"), "name": n, "delay": delay,
+                      **({"meet": str(meet)} if meet is not None else {})},
                 inputs=(src / f"{n}.txt",), params={"n": n}, code="v1", outputs=(f"up/{n}.txt",))
            for n in ("a", "b")]
     joined = Task(name="join", stage="scene", action=join, args={"build": str(build), "sep": sep},
@@ -105,8 +120,8 @@ def tasks(src: Path, build: Path, sep: str = "+", delay: float = 0.0) -> list[Ta
 
 
 def build(src: Path, out: Path, sep: str = "+", delay: float = 0.0, jobs: int = 2, cache: Path | None = None,
-          **scheduler):
-    return Scheduler(out, cache=cache, jobs=jobs, **scheduler).run(tasks(src, out, sep, delay))
+          meet: Path | None = None, **scheduler):
+    return Scheduler(out, cache=cache, jobs=jobs, **scheduler).run(tasks(src, out, sep, delay, meet))
 
 
 if __name__ == "__main__":

@@ -289,9 +289,18 @@ def test_build_given_fewer_cores_holds_its_workers_to_them(tmp_path):
 def test_a_one_core_task_keeps_to_a_cpu_of_its_own(src, tmp_path):
     """Two tasks side by side each run on their own CPU (fcpw's threads of one would
     otherwise wait on the other's); a task alone runs on all of the build's."""
+    import dataclasses
+
+    from pipeline.engine.executors import local_pool
+
+    def two_workers(workers):
+        # a worker for each task in flight, however busy the machine: the build's own
+        # pool grows only onto an idle core, and a test suite's other workers leave none
+        return local_pool(dataclasses.replace(workers, on_demand=False))
+
     usable = _affinity()
-    # both uppers run at once: each outlasts the wait after which the second worker starts
-    report = toy_graph.build(src, tmp_path / "build", jobs=2, delay=0.2)
+    # both uppers run at once: each waits for the other
+    report = toy_graph.build(src, tmp_path / "build", jobs=2, meet=tmp_path / "meet", executor=two_workers)
     a, b = (report.results[n]["cpus"] for n in ("upper:a", "upper:b"))
     assert len(a) == 1 and len(b) == 1 and a != b and set(a + b) <= set(usable)
     assert report.results["join"]["cpus"] == usable
