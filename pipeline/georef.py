@@ -14,6 +14,7 @@ All arrays are float64. `xy` is always plant-grid metres, shape (n, 2).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -85,14 +86,28 @@ def crs_to_plan(en, site) -> np.ndarray:
     return np.stack([de * c + dn * sn, -de * sn + dn * c], axis=1)
 
 
-def _crs3d(site) -> CRS:
+def _crs3d(code: str) -> CRS:
     # A projected CRS is 2D; its 3D form carries the ellipsoidal height through the
     # datum transformation instead of dropping it.
-    return CRS.from_user_input(site.crs).to_3d()
+    return CRS.from_user_input(code).to_3d()
+
+
+# Made once per process and CRS: PROJ chooses each new Transformer's operation from its
+# database (15-20 ms), and one worker's tasks (the scene, the terrain, the viewer) each
+# georeference the same site. A Transformer is safe to share between threads (pyproj
+# gives each thread its own PROJ object).
+@lru_cache(maxsize=None)
+def _crs_to_wgs84(code: str) -> Transformer:
+    return Transformer.from_crs(_crs3d(code), CRS.from_user_input(WGS84_3D), always_xy=True)
+
+
+@lru_cache(maxsize=None)
+def _wgs84_to_crs(code: str) -> Transformer:
+    return Transformer.from_crs(CRS.from_user_input(WGS84_3D), _crs3d(code), always_xy=True)
 
 
 def _to_wgs84(site) -> Transformer:
-    return Transformer.from_crs(_crs3d(site), CRS.from_user_input(WGS84_3D), always_xy=True)
+    return _crs_to_wgs84(site.crs)
 
 
 def plan_to_llh(site, xy, h) -> np.ndarray:
@@ -147,7 +162,7 @@ class Georeferencer:
         self.origin_llh: tuple[float, float, float] = tuple(float(v) for v in origin)
         lat0, lon0, h0 = self.origin_llh
         self._to_wgs84 = _to_wgs84(site)
-        self._from_wgs84 = Transformer.from_crs(CRS.from_user_input(WGS84_3D), _crs3d(site), always_xy=True)
+        self._from_wgs84 = _wgs84_to_crs(site.crs)
         # lon, lat in degrees and height -> ECEF -> topocentric ENU, all inside PROJ.
         self._topocentric = Transformer.from_pipeline(
             "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad"
