@@ -109,13 +109,14 @@ def gltf_poses(glb: Path) -> dict[str, tuple[np.ndarray, float]]:
         if asset not in visuals:
             model_doc, _ = container.read(glb.parent.parent / "models" / asset / f"{asset}.glb")
             visuals[asset] = {model_doc["nodes"][i]["name"]: m for i, m in container.visual_nodes(model_doc)}
-        local = visuals[asset][visual]
+        to_model = np.linalg.inv(visuals[asset][visual])
         for tag, ti, qi in zip(node["extras"]["tags"], t, q):
+            if tag in out:  # the first visual node that places it has said where
+                continue
             inst_m = matrix_from_quaternion(container.from_gltf_rotation(qi))
             inst_m[:3, 3] = ti
-            placement_y = inst_m @ np.linalg.inv(local)
-            pz = container.to_z_up(placement_y)
-            out.setdefault(tag, (pz[:3, 3], math.degrees(math.atan2(pz[1, 0], pz[0, 0]))))
+            pz = container.to_z_up(inst_m @ to_model)
+            out[tag] = (pz[:3, 3], math.degrees(math.atan2(pz[1, 0], pz[0, 0])))
     return out
 
 
