@@ -93,9 +93,9 @@ def _crs3d(code: str) -> CRS:
 
 
 # Made once per process and CRS: PROJ chooses each new Transformer's operation from its
-# database (15-20 ms), and one worker's tasks (the scene, the terrain, the viewer) each
-# georeference the same site. A Transformer is safe to share between threads (pyproj
-# gives each thread its own PROJ object).
+# database, and one worker's tasks (the scene, the terrain, the viewer) each georeference
+# the same site. A Transformer is safe to share between threads (pyproj gives each
+# thread its own PROJ object).
 @lru_cache(maxsize=None)
 def _crs_to_wgs84(code: str) -> Transformer:
     return Transformer.from_crs(_crs3d(code), CRS.from_user_input(WGS84_3D), always_xy=True)

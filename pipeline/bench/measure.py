@@ -34,14 +34,19 @@ _CHILD_LISTS = os.path.exists(f"/proc/{os.getpid()}/task/{os.getpid()}/children"
 
 
 def _children(pid: int) -> list[int]:
-    """pid's child processes, from its threads' lists (none once it has gone)."""
-    kids: list[int] = []
+    """pid's child processes, from its threads' lists (a thread or process that has
+    gone has none)."""
     try:
-        for tid in os.listdir(f"/proc/{pid}/task"):
+        threads = os.listdir(f"/proc/{pid}/task")
+    except OSError:
+        return []
+    kids: list[int] = []
+    for tid in threads:
+        try:
             with open(f"/proc/{pid}/task/{tid}/children") as f:
                 kids.extend(int(k) for k in f.read().split())
-    except OSError:
-        pass
+        except OSError:
+            continue
     return kids
 
 
