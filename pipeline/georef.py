@@ -106,16 +106,12 @@ def _wgs84_to_crs(code: str) -> Transformer:
     return Transformer.from_crs(CRS.from_user_input(WGS84_3D), _crs3d(code), always_xy=True)
 
 
-def _to_wgs84(site) -> Transformer:
-    return _crs_to_wgs84(site.crs)
-
-
 def plan_to_llh(site, xy, h) -> np.ndarray:
     """xy: (n, 2) plan metres, h: (n,) or scalar ellipsoidal heights -> (n, 3) WGS84 lat,
     lon (deg), height, through the site's CRS (no scene origin needed)."""
     p = _xy(xy)
     en = plan_to_crs(p, site)
-    lon, lat, hw = _transform(_to_wgs84(site), en[:, 0], en[:, 1], _per_point(h, len(p)))
+    lon, lat, hw = _transform(_crs_to_wgs84(site.crs), en[:, 0], en[:, 1], _per_point(h, len(p)))
     return np.stack([lat, lon, hw], axis=1)
 
 
@@ -129,7 +125,7 @@ def default_origin(site, platforms: Sequence[ir.Platform]) -> tuple[float, float
     centre = (pts.min(axis=0) + pts.max(axis=0)) / 2.0
     en = plan_to_crs(centre[None, :], site)[0]
     h = min(lv.elevation for lv in site.levels)
-    lon, lat, hw = _transform(_to_wgs84(site), en[0:1], en[1:2], np.array([h]))
+    lon, lat, hw = _transform(_crs_to_wgs84(site.crs), en[0:1], en[1:2], np.array([h]))
     return float(lat[0]), float(lon[0]), float(hw[0])
 
 
@@ -161,7 +157,7 @@ class Georeferencer:
             raise UserError(site.path, "origin", "no [origin]: build the Georeferencer with default_origin(site, platforms)")
         self.origin_llh: tuple[float, float, float] = tuple(float(v) for v in origin)
         lat0, lon0, h0 = self.origin_llh
-        self._to_wgs84 = _to_wgs84(site)
+        self._to_wgs84 = _crs_to_wgs84(site.crs)
         self._from_wgs84 = _wgs84_to_crs(site.crs)
         # lon, lat in degrees and height -> ECEF -> topocentric ENU, all inside PROJ.
         self._topocentric = Transformer.from_pipeline(

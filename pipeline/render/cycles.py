@@ -136,7 +136,10 @@ class CyclesScene:
         The first placement of each asset not loaded yet comes first: the imports, then
         the copies of what they made. The glTF importer makes and deletes a temporary
         object for each mesh, and Blender's deletion of an object looks through the whole
-        file's data, so an import costs in proportion to what is already loaded."""
+        file's data, so an import costs in proportion to what is already loaded.
+
+        A placement's children have stale world matrices until the update: nothing
+        reads them before it."""
         tags = list(tags)
         assets = set(self.prototypes)
         imports = []
@@ -147,14 +150,19 @@ class CyclesScene:
                 imports.append(tag)
         first = set(imports)
         for tag in imports + [t for t in tags if t not in first]:
-            self.load(tag, update=False)
+            self._load(tag)
         self.bpy.context.view_layer.update()
+
+    def load(self, tag: str) -> None:
+        """One placement (load_many)."""
+        self.load_many([tag])
 
     def _placements_layer(self):
         return self.bpy.context.view_layer.layer_collection.children[self._placements.name]
 
-    def load(self, tag: str, update: bool = True) -> None:
-        """Import a placement's built package (glTF) and put it at its ENU pose."""
+    def _load(self, tag: str) -> None:
+        """Import a placement's built package (glTF), or copy the asset's first
+        placement, and put it at its ENU pose."""
         if tag in self.roots:
             return
         p = self.site.placement(tag)
@@ -168,10 +176,6 @@ class CyclesScene:
             self.prototypes[p["asset"]] = tag
         self._collections[tag] = collection
         root.matrix_world = _matrix(self.bpy, self.site.pose(p))
-        # Children's world matrices are stale until the view layer updates; setting one
-        # before that would be relative to the parent's old pose.
-        if update:
-            self.bpy.context.view_layer.update()
         self.roots[tag], self.objects[tag] = root, objs
 
     def load_terrain(self) -> None:

@@ -158,7 +158,7 @@ def test_show_only_hides_exactly_the_other_placements(tmp_path):
         scene.show_only(["R-2"])
         only_2 = scene.render()
         assert hidden() == {"R-1": {True}, "R-2": {False}}
-        scene.load_many(["R-1", "R-2"])  # loading takes every placement out of the view layer and back
+        scene.load_many(["R-1", "R-2"])  # loading again keeps what show_only hid
         assert hidden() == {"R-1": {True}, "R-2": {False}}
         assert seen() == {2}
         scene.show_only(["R-1"])
