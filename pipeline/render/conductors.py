@@ -121,18 +121,24 @@ class CyclesWires:
         self.bpy, self.wires = bpy, wires
         self.temperature = None  # temperature_key of the shape drawn
         self.objects: dict[str, object] = {}
-        material = _material(bpy)
+        # Appending a material to a mesh looks through every object in the file (to
+        # give each user of the mesh its slot): done once, to the empty mesh each span's
+        # mesh is a copy of.
+        template = bpy.data.meshes.new("conductor")
+        template.materials.append(_material(bpy))
         for sid, paths in wires.paths(None).items():
             span = wires.span(sid)
             origin = np.asarray(span["from"]["enu"], float)
             verts, faces = _tubes(paths, wires.radius(span), origin)
-            mesh = _triangle_mesh(bpy, f"conductor:{sid}", verts, faces)
+            mesh = template.copy()
+            mesh.name = f"conductor:{sid}"
+            _fill_triangles(mesh, verts, faces)
             mesh.shade_smooth()
-            mesh.materials.append(material)
             ob = bpy.data.objects.new(f"conductor:{sid}", mesh)
             ob.location = origin.tolist()
             collection.objects.link(ob)
             self.objects[sid] = ob
+        bpy.data.meshes.remove(template)
 
     def follow(self, temperature_c: float | dict | None) -> None:
         """Every span's shape at `temperature_c` (Wires.paths); the vertex count does
@@ -153,10 +159,9 @@ class CyclesWires:
             ob.pass_index = ids.get(sid, 0)
 
 
-def _triangle_mesh(bpy, name: str, verts: np.ndarray, faces: np.ndarray):
-    """A Blender mesh of triangles: the steps of Mesh.from_pydata, fed from the arrays
-    without its Python list of every coordinate."""
-    mesh = bpy.data.meshes.new(name)
+def _fill_triangles(mesh, verts: np.ndarray, faces: np.ndarray) -> None:
+    """An empty Blender mesh given triangles: the steps of Mesh.from_pydata, fed from
+    the arrays without its Python list of every coordinate."""
     mesh.vertices.add(len(verts))
     mesh.loops.add(3 * len(faces))
     mesh.polygons.add(len(faces))
@@ -164,7 +169,6 @@ def _triangle_mesh(bpy, name: str, verts: np.ndarray, faces: np.ndarray):
     mesh.polygons.foreach_set("loop_start", np.arange(0, 3 * len(faces), 3, dtype=np.int32))
     mesh.polygons.foreach_set("vertices", np.ascontiguousarray(faces, np.int32).ravel())
     mesh.update(calc_edges=True)
-    return mesh
 
 
 def _tubes(paths: list[np.ndarray], radius: float, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
