@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+import pipeline  # noqa: F401  before a test module loads numpy: its idle OpenBLAS threads sleep (pipeline/__init__.py)
 from helpers import ROOT, SOURCES, made_once, twin
 
 CODE = ROOT / "pipeline"
