@@ -33,7 +33,7 @@ import shutil
 import time
 import uuid
 from concurrent.futures import CancelledError, Executor, Future
-from contextlib import contextmanager, nullcontext
+from contextlib import contextmanager, nullcontext, suppress
 from pathlib import Path
 from typing import Callable, Iterator
 
@@ -357,11 +357,25 @@ class BuildExecutor(DaskExecutor):
 
 
 def run_afresh(action, args: dict, staging: str | None, cores: int | None = None) -> dict:
-    """worker.run_task in a staging folder emptied first (when it has one)."""
-    if staging is not None:
-        shutil.rmtree(staging, ignore_errors=True)
-        Path(staging).mkdir(parents=True)
-    return run_task(action, args, staging, cores)
+    """worker.run_task in a folder of this run's own, which becomes the task's staging
+    folder when the task succeeds. dask runs a task at least once, and two runs of one
+    task can overlap (a worker recycled or lost while the scheduler hands its task to
+    another): neither may see the other's files (a package lists what its folder holds).
+    The first run to land keeps its folder; a later one, the same files, is dropped."""
+    if staging is None:
+        return run_task(action, args, staging, cores)
+    own = Path(f"{staging}.{uuid.uuid4().hex}")
+    own.mkdir(parents=True)
+    try:
+        out = run_task(action, args, str(own), cores)
+        if out.get("ok"):
+            with suppress(OSError):
+                os.rmdir(staging)  # the empty folder the scheduler made, never a landed run's
+            with suppress(OSError):
+                os.rename(own, staging)
+        return out
+    finally:
+        shutil.rmtree(own, ignore_errors=True)
 
 
 def worker_died(error: Exception) -> dict:

@@ -11,6 +11,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -29,7 +30,7 @@ except ImportError:
 import psutil
 
 from pipeline.builder import run
-from pipeline.engine.dask_executor import BuildExecutor, dask_executor, dask_pool, worn_out
+from pipeline.engine.dask_executor import BuildExecutor, dask_executor, dask_pool, run_afresh, worn_out
 from pipeline.engine.scheduler import Scheduler
 
 
@@ -65,6 +66,35 @@ def test_a_dask_build_makes_the_bytes_the_local_pool_makes(mini, tmp_path):
     assert tasks and all(e["ran"] for e in tasks)
     assert tree_hashes(out) == tree_hashes(local)
     assert not (out / ".staging").exists()
+
+
+def test_overlapping_runs_of_a_task_each_see_only_their_own_files(tmp_path):
+    """dask runs a task at least once, and two runs of one task can overlap: each lists
+    only what it wrote itself, and the staging folder holds the first run to land."""
+    staging = tmp_path / ".staging" / "key"
+    staging.mkdir(parents=True)  # as the scheduler makes it
+    first_wrote, second_landed = threading.Event(), threading.Event()
+
+    def package(staging: Path, run: str) -> dict:
+        (staging / "mesh.bin").write_text(run)
+        if run == "first":
+            first_wrote.set()
+            assert second_landed.wait(60)
+        listed = sorted(p.name for p in staging.iterdir())
+        (staging / "manifest.json").write_text(json.dumps(listed))
+        return {"listed": listed}
+
+    outcomes = {}
+    first = threading.Thread(target=lambda: outcomes.update(first=run_afresh(package, {"run": "first"}, str(staging))))
+    first.start()
+    assert first_wrote.wait(60)
+    outcomes["second"] = run_afresh(package, {"run": "second"}, str(staging))
+    second_landed.set()
+    first.join(60)
+    assert [outcomes[r]["result"]["listed"] for r in ("first", "second")] == [["mesh.bin"], ["mesh.bin"]]
+    assert (staging / "mesh.bin").read_text() == "second"
+    assert json.loads((staging / "manifest.json").read_text()) == ["mesh.bin"]
+    assert [p.name for p in staging.parent.iterdir()] == ["key"]  # neither run's own folder is left
 
 
 def test_recycled_workers_still_build_the_same_bytes(mini, tmp_path):
