@@ -75,9 +75,9 @@ def test_overlapping_runs_of_a_task_each_see_only_their_own_files(tmp_path):
     staging.mkdir(parents=True)  # as the scheduler makes it
     first_wrote, second_landed = threading.Event(), threading.Event()
 
-    def package(staging: Path, run: str) -> dict:
-        (staging / "mesh.bin").write_text(run)
-        if run == "first":
+    def package(staging: Path, which: str) -> dict:
+        (staging / "mesh.bin").write_text(which)
+        if which == "first":
             first_wrote.set()
             assert second_landed.wait(60)
         listed = sorted(p.name for p in staging.iterdir())
@@ -85,10 +85,10 @@ def test_overlapping_runs_of_a_task_each_see_only_their_own_files(tmp_path):
         return {"listed": listed}
 
     outcomes = {}
-    first = threading.Thread(target=lambda: outcomes.update(first=run_afresh(package, {"run": "first"}, str(staging))))
+    first = threading.Thread(target=lambda: outcomes.update(first=run_afresh(package, {"which": "first"}, str(staging))))
     first.start()
     assert first_wrote.wait(60)
-    outcomes["second"] = run_afresh(package, {"run": "second"}, str(staging))
+    outcomes["second"] = run_afresh(package, {"which": "second"}, str(staging))
     second_landed.set()
     first.join(60)
     assert [outcomes[r]["result"]["listed"] for r in ("first", "second")] == [["mesh.bin"], ["mesh.bin"]]
