@@ -371,9 +371,9 @@ class Scheduler:
 
     def _drop_pool(self, b: _Build) -> dict:
         """Shut a pool one of whose workers died (the next task starts a new one); the
-        processes it had, whose exit codes say how the worker died."""
+        processes it had, grown ones too, whose exit codes say how the worker died."""
+        workers = {**b.workers, **pool_processes(b.pool)}
         b.pool.shutdown(wait=True, cancel_futures=True)
-        workers = b.workers
         b.pool, b.warming, b.dead, b.workers = None, [], False, {}
         return workers
 
