@@ -98,7 +98,6 @@ class _Build:
     pool: Any = None  # started when the first task needs a worker (Scheduler._pool)
     threads: int | None = None  # cores per worker (Scheduler._worker_setup), set once per build
     dead: bool = False  # the pool refused a task: one of its workers died
-    workers: dict = field(default_factory=dict)  # the pool's processes, kept to learn how one died
 
     def __post_init__(self):
         self.pending = {t.name: t for t in self.order}
@@ -357,7 +356,6 @@ class Scheduler:
             return False
         b.running[future] = task
         b.report.explanations.append(_stood_on(explain(task, previous, False, b.digests), stood_on))
-        b.workers.update(pool_processes(pool))
         return True
 
     def _pool(self, b: _Build):
@@ -371,10 +369,11 @@ class Scheduler:
 
     def _drop_pool(self, b: _Build) -> dict:
         """Shut a pool one of whose workers died (the next task starts a new one); the
-        processes it had, grown ones too, whose exit codes say how the worker died."""
-        workers = {**b.workers, **pool_processes(b.pool)}
+        processes it had, whose exit codes say how the worker died (read before the
+        shutdown, which forgets them)."""
+        workers = pool_processes(b.pool)
         b.pool.shutdown(wait=True, cancel_futures=True)
-        b.pool, b.warming, b.dead, b.workers = None, [], False, {}
+        b.pool, b.warming, b.dead = None, [], False
         return workers
 
     # --- collect ----------------------------------------------------------------
